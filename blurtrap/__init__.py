@@ -1,0 +1,33 @@
+"""blurtrap: exact, differentiable optical-trap calibration with motion blur and aliasing.
+
+SI units in the Python API. Inference runs in float64 (see ``blurtrap._config``).
+Heavy optional pieces (``blurtrap.plotting`` -> matplotlib, posterior sampling -> emcee) are
+imported lazily: ``import blurtrap`` imports neither.
+"""
+
+from importlib.metadata import PackageNotFoundError, version as _version
+
+from ._config import enable_x64 as enable_x64, x64_enabled as x64_enabled
+from .physics import (
+    BOLTZMANN as BOLTZMANN,
+    ExponentialKernel as ExponentialKernel,
+    ProductKernel as ProductKernel,
+    RectKernel as RectKernel,
+    TrapezoidKernel as TrapezoidKernel,
+    blur_factor as blur_factor,
+    blur_factor_pade as blur_factor_pade,
+    frame_autocovariance as frame_autocovariance,
+    lorentzian as lorentzian,
+    measured_variance as measured_variance,
+    psd_folded as psd_folded,
+    psd_measured as psd_measured,
+    sample_variance_se as sample_variance_se,
+    stiffness_from_variance as stiffness_from_variance,
+    transfer_rect as transfer_rect,
+    variance_general as variance_general,
+)
+
+try:
+    __version__ = _version("blurtrap")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0+unknown"

@@ -1,0 +1,57 @@
+"""Precision policy.
+
+blurtrap guarantees float64 for inference in two ways:
+
+1. ``blurtrap.enable_x64()`` switches JAX to 64-bit globally. The CLI, the notebooks and the
+   test-suite call it first.
+2. Every public estimator (``calibrate``, the likelihoods, ``sample_posterior``, ``diagnose``)
+   runs inside :func:`float64_scope`, i.e. ``jax.enable_x64(True)``, so it computes in float64
+   even when the user never called ``enable_x64``. If the *data* arrive as float32 the
+   precision is already lost, so :func:`warn_if_float32` warns.
+
+The physics functions follow the dtype of their inputs and are written to stay accurate in
+float32 as well (series branches, ``expm1``, no catastrophic cancellation).
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import jax
+import numpy as np
+
+
+def enable_x64(enable: bool = True) -> None:
+    """Switch JAX to float64 (``jax_enable_x64``) for the whole process."""
+    jax.config.update("jax_enable_x64", bool(enable))
+
+
+def x64_enabled() -> bool:
+    return bool(jax.config.jax_enable_x64)
+
+
+def float64_scope(fn):
+    """Decorator: run ``fn`` with 64-bit JAX types enabled."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with jax.enable_x64(True):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+class Float32DataWarning(UserWarning):
+    """Data reached an estimator in float32; estimates are limited to float32 precision."""
+
+
+def warn_if_float32(name: str, x) -> None:
+    dtype = getattr(x, "dtype", None)
+    if dtype is not None and np.dtype(dtype) in (np.dtype(np.float32), np.dtype(np.float16)):
+        warnings.warn(
+            f"{name} has dtype {np.dtype(dtype).name}; blurtrap computes in float64 but the "
+            "input has already lost precision. Pass float64 arrays.",
+            Float32DataWarning,
+            stacklevel=3,
+        )

@@ -1,0 +1,1 @@
+"""blurtrap.inference"""

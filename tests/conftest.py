@@ -1,0 +1,41 @@
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import blurtrap  # noqa: E402
+
+blurtrap.enable_x64()
+
+
+@pytest.fixture
+def rng():
+    """A numpy Generator with a fixed, recorded seed (never global RNG state)."""
+    return np.random.default_rng(20061225)
+
+
+@pytest.fixture
+def getkey():
+    """Fresh JAX keys from a fixed seed: `k = getkey()`."""
+    key = jax.random.key(1234)
+    state = {"key": key}
+
+    def _next():
+        state["key"], sub = jax.random.split(state["key"])
+        return sub
+
+    return _next
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    import sys
+
+    if "matplotlib.pyplot" in sys.modules:
+        import matplotlib.pyplot as plt
+
+        plt.close("all")
