@@ -143,6 +143,7 @@ def measured_variance(k, gamma, exposure, temperature=DEFAULT_TEMPERATURE, track
     return BOLTZMANN * t / k * _blur_factor(w * k / gamma) + eps2
 
 
+@jax.jit
 def _inverse_s_over_alpha(y):
     """Solve S(alpha)/alpha = y (y > 0) for alpha by Newton's method on log alpha.
 
