@@ -1,1 +1,19 @@
-"""blurtrap.data"""
+"""Recordings and their I/O: containers, validation, CSV / NPZ / manifest files.
+
+Positions are in metres and times in seconds. numpy only: importing this subpackage does
+not import jax itself (JAX arrays are accepted as input).
+"""
+
+from ._csv import ExcludedRowsWarning as ExcludedRowsWarning
+from ._csv import infer_frame_interval as infer_frame_interval
+from ._csv import load_csv as load_csv
+from ._io import from_arrays as from_arrays
+from ._io import load as load
+from ._manifest import load_manifest as load_manifest
+from ._manifest import save_manifest as save_manifest
+from ._npz import load_npz as load_npz
+from ._npz import save_npz as save_npz
+from ._recording import Recording as Recording
+from ._recording import TimingJitter as TimingJitter
+from ._recording_set import RecordingSet as RecordingSet
+from ._units import ALLOWED_UNITS as ALLOWED_UNITS

@@ -1,0 +1,171 @@
+"""In-memory arrays -> recordings, and :func:`load` dispatching on the file extension."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..physics._constants import DEFAULT_TEMPERATURE
+from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
+from ._recording_set import RecordingSet
+from ._units import canonical_unit, check_pixel_size, to_metres
+
+
+def _per_row(name: str, value, n: int) -> list:
+    """Broadcast a scalar (or None) to n rows, or check a per-row sequence has length n."""
+    if value is None or isinstance(value, (str, bool)) or np.ndim(value) == 0:
+        return [value] * n
+    arr = np.asarray(value)
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise ValueError(
+            f"{name} must be a scalar or have one value per recording ({n}); got shape {arr.shape}"
+        )
+    return list(arr.tolist()) if arr.dtype.kind in "iufb" else list(value)
+
+
+def from_arrays(
+    positions,
+    *,
+    frame_interval,
+    exposure,
+    temperature=DEFAULT_TEMPERATURE,
+    times=None,
+    laser_power=None,
+    position_unit: str = "m",
+    pixel_size_m=None,
+    metadata=None,
+    name=None,
+    allow_irregular: bool = False,
+    timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
+    check_units: bool = True,
+) -> Recording | RecordingSet:
+    """Build recordings from numpy or JAX arrays.
+
+    **Arguments:**
+
+    - `positions`: 1-D (one recording -> :class:`Recording`) or 2-D (rows are recordings ->
+      :class:`RecordingSet`), in `position_unit` (m, mm, um/µm, nm, or px with
+      `pixel_size_m` [m]); converted to float64 metres.
+    - `frame_interval`, `exposure` [s], `temperature` [K], `laser_power` [W] (NaN or None:
+      unknown): scalars, or one value per row for 2-D input.
+    - `times` [s]: None, 1-D (shared by all rows) or 2-D (one row per recording).
+    - `name`: str (rows get ``name[i]``) or a sequence of names.
+    - other keywords: see :class:`Recording`.
+
+    **Raises:** ``ValueError`` as :class:`Recording`; for 2-D input the message starts
+    with the row index.
+    """
+    unit = canonical_unit(position_unit)
+    px = check_pixel_size(unit, pixel_size_m)
+    try:
+        raw = np.asarray(positions)
+    except Exception as e:
+        raise ValueError(f"positions could not be converted to an array: {e}") from None
+    if raw.ndim not in (1, 2):
+        raise ValueError(
+            f"positions must be 1-D (one recording) or 2-D (rows = recordings); got shape "
+            f"{raw.shape}"
+        )
+    meta = {} if metadata is None else dict(metadata)
+    if raw.dtype.kind in "iuf" and raw.dtype != np.float64:
+        meta.setdefault("input_dtype", raw.dtype.name)
+    if unit != "m":
+        meta["position_unit"] = unit
+    pos = to_metres(raw, unit, px) if raw.dtype.kind in "iuf" else raw
+
+    def power(p):
+        if p is None:
+            return None
+        try:
+            return None if math.isnan(float(p)) else p
+        except (TypeError, ValueError):
+            return p  # let Recording report it
+
+    common = dict(
+        allow_irregular=allow_irregular,
+        timing_tolerance=timing_tolerance,
+        check_units=check_units,
+    )
+    if raw.ndim == 1:
+        return Recording(
+            pos,
+            frame_interval=frame_interval,
+            exposure=exposure,
+            temperature=temperature,
+            times=times,
+            laser_power=power(laser_power),
+            metadata=meta,
+            name=name,
+            **common,
+        )
+    n = raw.shape[0]
+    fis = _per_row("frame_interval", frame_interval, n)
+    ws = _per_row("exposure", exposure, n)
+    temps = _per_row("temperature", temperature, n)
+    powers = _per_row("laser_power", laser_power, n)
+    if name is None or isinstance(name, str):
+        names = [None if name is None else f"{name}[{i}]" for i in range(n)]
+    else:
+        names = list(name)
+        if len(names) != n:
+            raise ValueError(f"name must have one entry per recording ({n}); got {len(names)}")
+    if times is None:
+        trows = [None] * n
+    else:
+        t = np.asarray(times)
+        if t.ndim == 1:
+            trows = [t] * n
+        elif t.ndim == 2 and t.shape[0] == n:
+            trows = list(t)
+        else:
+            raise ValueError(
+                f"times must be 1-D (shared) or 2-D with one row per recording ({n}); got "
+                f"shape {t.shape}"
+            )
+    recs = []
+    for i in range(n):
+        try:
+            recs.append(
+                Recording(
+                    pos[i],
+                    frame_interval=fis[i],
+                    exposure=ws[i],
+                    temperature=temps[i],
+                    times=trows[i],
+                    laser_power=power(powers[i]),
+                    metadata=meta,
+                    name=names[i],
+                    **common,
+                )
+            )
+        except ValueError as e:
+            raise ValueError(f"recording {i} (row {i} of positions): {e}") from None
+    return RecordingSet(recs)
+
+
+_LOADERS = {".json": "manifest", ".npz": "npz", ".csv": "csv"}
+
+
+def load(path, **kwargs) -> Recording | RecordingSet:
+    """Load recordings from ``path`` by extension: ``.json`` -> :func:`load_manifest`
+    (RecordingSet), ``.npz`` -> :func:`load_npz`, ``.csv`` -> :func:`load_csv` (keywords
+    such as ``exposure`` are passed on)."""
+    from ._csv import load_csv
+    from ._manifest import load_manifest
+    from ._npz import load_npz
+
+    p = Path(os.fspath(path))
+    kind = _LOADERS.get(p.suffix.lower())
+    if kind is None:
+        raise ValueError(
+            f"{p}: unknown file type {p.suffix!r}; expected one of {sorted(_LOADERS)} "
+            "(manifest JSON, NPZ, CSV)"
+        )
+    if kind == "manifest":
+        return load_manifest(p, **kwargs)
+    if kind == "npz":
+        return load_npz(p, **kwargs)
+    return load_csv(p, **kwargs)

@@ -1,0 +1,243 @@
+"""Manifest JSON: a set of CSV recordings with their acquisition settings (DESIGN section 6).
+
+```json
+{"position_unit": "nm",
+ "recordings": [{"file": "w010.csv", "frame_interval_s": 6.667e-4, "exposure_s": 1.0e-4,
+                 "temperature_K": 295.0, "laser_power_mW": 100.0}]}
+```
+Files are relative to the manifest. Numbers are read as exact decimals, so the mW -> W
+conversion and the saved/loaded values are bit-exact.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from decimal import Decimal
+from pathlib import Path
+
+from ..physics._constants import DEFAULT_TEMPERATURE
+from ._csv import load_csv, write_csv
+from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
+from ._recording_set import RecordingSet
+from ._units import canonical_unit, check_pixel_size, decimal_text
+
+_TOP_KEYS = ("position_unit", "pixel_size_m", "recordings", "description")
+_ENTRY_KEYS = (
+    "file",
+    "frame_interval_s",
+    "exposure_s",
+    "temperature_K",
+    "laser_power_mW",
+    "name",
+    "metadata",
+    "allow_irregular",
+    "timing_tolerance",
+    "check_units",
+)
+# metadata keys that the loaders set themselves; not written back by save_manifest
+_LOADER_KEYS = ("source", "excluded_rows", "defaults_applied", "position_unit")
+
+
+def _plain(obj):
+    """Decimals from the JSON parser -> float, recursively."""
+    if isinstance(obj, Decimal):
+        return float(obj)
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_plain(v) for v in obj]
+    return obj
+
+
+def _number(where: str, key: str, value, scale_exp: int = 0) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, Decimal, float)):
+        raise ValueError(f"{where}: {key} must be a number; got {value!r}")
+    if isinstance(value, float):  # NaN / Infinity constants
+        return value
+    return float(Decimal(value).scaleb(-scale_exp))
+
+
+def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
+    """Load a manifest JSON and its CSV files into a :class:`RecordingSet`.
+
+    Entry keys: ``file`` and ``exposure_s`` (required), ``frame_interval_s`` (else inferred
+    from the CSV time stamps), ``temperature_K`` (else 295 K, noted in
+    ``metadata["defaults_applied"]``), ``laser_power_mW``, ``name`` (default: file stem),
+    ``metadata``, ``allow_irregular``, ``timing_tolerance``, ``check_units``. Top level:
+    ``position_unit`` (required), ``pixel_size_m`` (for ``px``), ``recordings``,
+    ``description``. Unknown keys are errors (so ``exposure_ms`` cannot be ignored).
+
+    **Raises:** ``ValueError`` naming the manifest, the entry and the problem;
+    ``FileNotFoundError`` for a missing CSV.
+    """
+    path = Path(os.fspath(path))
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{path}: not UTF-8 text ({e})") from None
+    if not text.strip():
+        raise ValueError(f"{path}: manifest file is empty")
+    try:
+        doc = json.loads(text, parse_float=Decimal)
+    except json.JSONDecodeError as e:
+        raise ValueError(
+            f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}"
+        ) from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: the manifest must be a JSON object with 'recordings'")
+    unknown = sorted(set(doc) - set(_TOP_KEYS))
+    if unknown:
+        raise ValueError(f"{path}: unknown top-level key(s) {unknown}; allowed: {list(_TOP_KEYS)}")
+    if "position_unit" not in doc:
+        raise ValueError(f'{path}: \'position_unit\' is missing (e.g. "position_unit": "nm")')
+    try:
+        unit = canonical_unit(doc["position_unit"])
+        px = check_pixel_size(
+            unit,
+            None
+            if "pixel_size_m" not in doc
+            else _number(str(path), "pixel_size_m", doc["pixel_size_m"]),
+        )
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+    entries = doc.get("recordings")
+    if not isinstance(entries, list) or not entries:
+        raise ValueError(f"{path}: 'recordings' must be a non-empty list of entries")
+
+    recs = []
+    for i, e in enumerate(entries):
+        where = f"{path}, recordings[{i}]"
+        if not isinstance(e, dict):
+            raise ValueError(f"{where}: each entry must be a JSON object; got {e!r}")
+        unknown = sorted(set(e) - set(_ENTRY_KEYS))
+        if unknown:
+            raise ValueError(f"{where}: unknown key(s) {unknown}; allowed: {list(_ENTRY_KEYS)}")
+        for key in ("file", "exposure_s"):
+            if key not in e:
+                raise ValueError(f"{where}: required key {key!r} is missing")
+        if not isinstance(e["file"], str) or not e["file"]:
+            raise ValueError(f"{where}: 'file' must be a file name; got {e['file']!r}")
+        csv_path = path.parent / e["file"]
+        where = f"{where} ({e['file']})"
+        if not csv_path.is_file():
+            raise FileNotFoundError(f"{where}: file not found: {csv_path}")
+        kw = {}
+        defaults = {}
+        kw["exposure"] = _number(where, "exposure_s", e["exposure_s"])
+        if "frame_interval_s" in e:
+            kw["frame_interval"] = _number(where, "frame_interval_s", e["frame_interval_s"])
+        if "temperature_K" in e:
+            kw["temperature"] = _number(where, "temperature_K", e["temperature_K"])
+        else:
+            kw["temperature"] = DEFAULT_TEMPERATURE
+            defaults["temperature_K"] = DEFAULT_TEMPERATURE
+        if e.get("laser_power_mW") is not None:
+            kw["laser_power"] = _number(where, "laser_power_mW", e["laser_power_mW"], 3)
+        meta = e.get("metadata", {})
+        if not isinstance(meta, dict):
+            raise ValueError(f"{where}: 'metadata' must be a JSON object; got {meta!r}")
+        meta = _plain(meta)
+        meta["manifest"] = str(path)
+        if defaults:
+            meta["defaults_applied"] = defaults
+        name = e.get("name", Path(e["file"]).stem)
+        try:
+            recs.append(
+                load_csv(
+                    csv_path,
+                    position_unit=unit,
+                    pixel_size_m=px,
+                    on_bad_rows=on_bad_rows,
+                    name=name,
+                    metadata=meta,
+                    allow_irregular=bool(e.get("allow_irregular", False)),
+                    timing_tolerance=_number(
+                        where,
+                        "timing_tolerance",
+                        e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE))),
+                    ),
+                    check_units=bool(e.get("check_units", True)),
+                    **kw,
+                )
+            )
+        except ValueError as err:
+            raise ValueError(f"{path}, recordings[{i}]: {err}") from None
+    return RecordingSet(recs)
+
+
+def _safe_stem(name: str | None, i: int) -> str:
+    if not name:
+        return f"recording_{i:03d}"
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or f"recording_{i:03d}"
+    return stem
+
+
+def save_manifest(
+    recordings: Recording | RecordingSet,
+    path,
+    position_unit: str = "nm",
+    *,
+    pixel_size_m=None,
+) -> list[Path]:
+    """Write a manifest JSON at ``path`` and one CSV per recording next to it.
+
+    CSV names come from the recording names (made file-system safe and unique), else
+    ``recording_000.csv``, ... Positions are written as exact decimals in `position_unit`
+    and times with repr precision, so :func:`load_manifest` gives back identical float64
+    values (for ``px`` only to within a rounding). Existing files are overwritten.
+
+    **Returns:** the paths written (manifest first).
+    """
+    if isinstance(recordings, Recording):
+        recordings = RecordingSet([recordings])
+    if not isinstance(recordings, RecordingSet):
+        recordings = RecordingSet(recordings)
+    unit = canonical_unit(position_unit)
+    px = check_pixel_size(unit, pixel_size_m)
+    path = Path(os.fspath(path))
+    folder = path.parent
+    used: set[str] = set()
+    entries = []
+    decimals: dict[str, str] = {}
+    written = [path]
+    for i, r in enumerate(recordings):
+        stem = _safe_stem(r.name, i)
+        fname, k = f"{stem}.csv", 1
+        while fname.lower() in used or (folder / fname).resolve() == path.resolve():
+            fname, k = f"{stem}_{k}.csv", k + 1
+        used.add(fname.lower())
+        write_csv(r, folder / fname, unit, px)
+        written.append(folder / fname)
+        entry: dict = {
+            "file": fname,
+            "frame_interval_s": r.frame_interval,
+            "exposure_s": r.exposure,
+            "temperature_K": r.temperature,
+        }
+        if r.laser_power is not None:
+            token = f"@@DECIMAL{i}@@"
+            decimals[token] = decimal_text(Decimal(repr(r.laser_power)).scaleb(3))
+            entry["laser_power_mW"] = token
+        if r.name is not None:
+            entry["name"] = r.name
+        meta = {k: v for k, v in thaw(r.metadata).items() if k not in _LOADER_KEYS + ("manifest",)}
+        if meta:
+            entry["metadata"] = meta
+        if r.allow_irregular:
+            entry["allow_irregular"] = True
+        if r.timing_tolerance != DEFAULT_TIMING_TOLERANCE:
+            entry["timing_tolerance"] = r.timing_tolerance
+        if not r.check_units:
+            entry["check_units"] = False
+        entries.append(entry)
+    doc: dict = {"position_unit": unit}
+    if unit == "px":
+        doc["pixel_size_m"] = px
+    doc["recordings"] = entries
+    text = json.dumps(doc, indent=1, ensure_ascii=False)
+    for token, dec in decimals.items():
+        text = text.replace(f'"{token}"', dec)
+    path.write_text(text + "\n", encoding="utf-8", newline="\n")
+    return written

@@ -1,0 +1,158 @@
+"""NPZ storage: bit-exact arrays plus a JSON header with the scalar fields and metadata.
+
+Layout: ``__blurtrap__`` (a 0-d unicode array holding JSON), ``positions_<i>`` and, where
+present, ``times_<i>``. No pickles are written or read.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..physics._constants import DEFAULT_TEMPERATURE
+from ._recording import Recording, thaw
+from ._recording_set import RecordingSet
+
+_HEADER_KEY = "__blurtrap__"
+_FORMAT = "blurtrap.recordings"
+_VERSION = 1
+
+
+def save_npz(recordings: Recording | RecordingSet, path, *, compress: bool = False) -> None:
+    """Save a :class:`Recording` or :class:`RecordingSet` to ``path`` (exact file name kept).
+
+    Positions and times are stored as raw float64, so :func:`load_npz` returns them bit for
+    bit; scalars and metadata go through JSON with repr precision (also exact).
+    """
+    if isinstance(recordings, Recording):
+        kind, recs = "recording", (recordings,)
+    elif isinstance(recordings, RecordingSet):
+        kind, recs = "set", tuple(recordings)
+    else:
+        raise TypeError(
+            f"save_npz expects a Recording or RecordingSet; got {type(recordings).__name__}"
+        )
+    arrays: dict[str, np.ndarray] = {}
+    entries = []
+    for i, r in enumerate(recs):
+        arrays[f"positions_{i}"] = np.asarray(r.positions)
+        if r.times is not None:
+            arrays[f"times_{i}"] = np.asarray(r.times)
+        entries.append(
+            {
+                "frame_interval": r.frame_interval,
+                "exposure": r.exposure,
+                "temperature": r.temperature,
+                "laser_power": r.laser_power,
+                "name": r.name,
+                "metadata": thaw(r.metadata),
+                "allow_irregular": r.allow_irregular,
+                "timing_tolerance": r.timing_tolerance,
+                "check_units": r.check_units,
+                "has_times": r.times is not None,
+            }
+        )
+    header = {"format": _FORMAT, "version": _VERSION, "kind": kind, "recordings": entries}
+    arrays[_HEADER_KEY] = np.array(json.dumps(header))
+    with open(os.fspath(path), "wb") as f:
+        (np.savez_compressed if compress else np.savez)(f, **arrays)
+
+
+def load_npz(
+    path,
+    *,
+    frame_interval=None,
+    exposure=None,
+    temperature=DEFAULT_TEMPERATURE,
+    laser_power=None,
+) -> Recording | RecordingSet:
+    """Load what :func:`save_npz` wrote (a Recording or a RecordingSet, as saved).
+
+    A plain NPZ without a blurtrap header is accepted if it holds ``positions`` [m] (1-D, or
+    2-D with one recording per row) and optionally ``times`` [s]; ``frame_interval``,
+    ``exposure``, ``temperature`` and ``laser_power`` are then taken from arrays of those
+    names in the file, else from the keywords.
+    """
+    path = Path(os.fspath(path))
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise ValueError(f"{path}: not a readable .npz file ({e})") from None
+    try:
+        if _HEADER_KEY in data:
+            return _from_blurtrap(data)
+        return _from_plain(data, frame_interval, exposure, temperature, laser_power)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+
+
+def _from_blurtrap(data):
+    try:
+        header = json.loads(str(data[_HEADER_KEY]))
+    except json.JSONDecodeError as e:
+        raise ValueError(f"corrupt {_HEADER_KEY} header ({e})") from None
+    if header.get("format") != _FORMAT or header.get("version") != _VERSION:
+        raise ValueError(
+            f"unsupported header format {header.get('format')!r} version "
+            f"{header.get('version')!r}; expected {_FORMAT!r} version {_VERSION}"
+        )
+    recs = []
+    for i, e in enumerate(header["recordings"]):
+        if f"positions_{i}" not in data:
+            raise ValueError(f"array positions_{i} is missing")
+        recs.append(
+            Recording(
+                data[f"positions_{i}"],
+                frame_interval=e["frame_interval"],
+                exposure=e["exposure"],
+                temperature=e["temperature"],
+                times=data[f"times_{i}"] if e["has_times"] else None,
+                laser_power=e["laser_power"],
+                metadata=e["metadata"],
+                name=e["name"],
+                allow_irregular=e["allow_irregular"],
+                timing_tolerance=e["timing_tolerance"],
+                check_units=e["check_units"],
+            )
+        )
+    if header["kind"] == "recording":
+        return recs[0]
+    return RecordingSet(recs)
+
+
+def _from_plain(data, frame_interval, exposure, temperature, laser_power):
+    from ._io import from_arrays
+
+    if "positions" not in data:
+        raise ValueError(
+            f"no 'positions' array (found {sorted(data)}); expected a file written by "
+            "save_npz or one with 'positions' [m] and optionally 'times' [s]"
+        )
+
+    def pick(key, given):
+        if key in data:
+            v = data[key]
+            return v.item() if v.ndim == 0 else v
+        return given
+
+    fi = pick("frame_interval", frame_interval)
+    w = pick("exposure", exposure)
+    if fi is None or w is None:
+        raise ValueError(
+            "frame_interval and exposure are not stored in the file; pass them as keywords [s]"
+        )
+    return from_arrays(
+        data["positions"],
+        frame_interval=fi,
+        exposure=w,
+        temperature=pick("temperature", temperature),
+        laser_power=pick("laser_power", laser_power),
+        times=data.get("times"),
+    )

@@ -1,0 +1,457 @@
+"""The :class:`Recording` container: one position trace with its acquisition metadata.
+
+All validation happens at construction and raises ``ValueError`` naming the parameter, the
+offending value and what was expected. Nothing is ever dropped or repaired silently; the few
+conversions that are made (integer or float32 positions -> float64) are noted in ``metadata``.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..physics._constants import DEFAULT_TEMPERATURE
+
+#: Default tolerance on time-stamp irregularity, relative to the frame interval.
+DEFAULT_TIMING_TOLERANCE = 1e-3
+# Heuristic unit-slip thresholds (disabled with check_units=False).
+_MAX_PLAUSIBLE_INTERVAL_S = 1.0
+_MAX_PLAUSIBLE_POSITION_STD_M = 1e-3
+_MIN_PLAUSIBLE_TEMPERATURE_K = 100.0
+_MAX_PLAUSIBLE_LASER_POWER_W = 10.0
+
+
+class TimingJitter(NamedTuple):
+    """Deviation of the time stamps from the best-fitting regular grid ``t0 + i * dt``.
+
+    **Fields:** ``std`` [s] and ``max_deviation`` [s] (largest absolute deviation), and
+    ``fitted_interval`` [s] (the slope ``dt`` of that grid).
+    """
+
+    std: float
+    max_deviation: float
+    fitted_interval: float
+
+
+def _g(x) -> str:
+    return f"{x:.6g}"
+
+
+def _freeze(obj, path: str = "metadata"):
+    """Copy metadata into an immutable-ish, JSON-compatible form."""
+    if isinstance(obj, (dict, types.MappingProxyType)):
+        out = {}
+        for k, v in obj.items():
+            if not isinstance(k, str):
+                raise ValueError(f"{path} keys must be strings; got key {k!r}")
+            out[k] = _freeze(v, f"{path}[{k!r}]")
+        return types.MappingProxyType(out)
+    if isinstance(obj, (list, tuple)):
+        return tuple(_freeze(v, f"{path}[{i}]") for i, v in enumerate(obj))
+    if isinstance(obj, np.ndarray):
+        return _freeze(obj.tolist(), path)
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if obj is None or isinstance(obj, (str, bool, int, float)):
+        return obj
+    raise ValueError(
+        f"{path} = {obj!r} has type {type(obj).__name__}; metadata values must be str, "
+        "int, float, bool, None, lists or dicts of these (so that they can be saved)"
+    )
+
+
+def thaw(obj):
+    """JSON-serialisable plain copy of frozen metadata."""
+    if isinstance(obj, (dict, types.MappingProxyType)):
+        return {k: thaw(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [thaw(v) for v in obj]
+    return obj
+
+
+def _scalar(name: str, value, unit: str) -> float:
+    if isinstance(value, bool) or value is None:
+        raise ValueError(f"{name} must be a number [{unit}]; got {value!r}")
+    try:
+        arr = np.asarray(value)
+    except Exception:  # pragma: no cover - exotic objects
+        raise ValueError(f"{name} must be a number [{unit}]; got {value!r}") from None
+    if arr.ndim != 0 or arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be a real scalar [{unit}]; got {value!r}")
+    v = float(arr)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite [{unit}]; got {name} = {v!r}")
+    return v
+
+
+def _positions(positions, check_units: bool) -> tuple[np.ndarray, str | None]:
+    try:
+        arr = np.asarray(positions)
+    except Exception as e:
+        raise ValueError(f"positions could not be converted to an array: {e}") from None
+    kind = arr.dtype.kind
+    if kind == "b":
+        raise ValueError("positions must be numeric [m]; got a boolean array")
+    if kind == "c":
+        raise ValueError("positions must be real [m]; got a complex array")
+    if kind not in "iuf":
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"positions must be numeric [m]; got an array of dtype {arr.dtype}"
+            ) from None
+    if arr.ndim != 1:
+        raise ValueError(
+            f"positions must be a 1-D array (one trace) [m]; got shape {arr.shape}. "
+            "For several traces use blurtrap.data.from_arrays (rows = recordings)."
+        )
+    note = None if arr.dtype == np.float64 else arr.dtype.name
+    arr = np.array(arr, dtype=np.float64, copy=True)
+    n = arr.shape[0]
+    if n < 2:
+        raise ValueError(f"positions must hold at least 2 frames; got {n}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        shown = ", ".join(str(i) for i in bad[:5]) + (", ..." if bad.size > 5 else "")
+        raise ValueError(
+            f"positions contains {bad.size} non-finite value(s) (NaN/inf) at index [{shown}]; "
+            f"first: positions[{bad[0]}] = {float(arr[bad[0]])!r}. blurtrap never drops frames "
+            "silently: fix or remove them (the CSV loaders offer on_bad_rows='exclude')"
+        )
+    if np.all(arr == arr[0]):
+        raise ValueError(
+            f"positions is constant (zero variance; every value = {float(arr[0])!r}): a trapped "
+            "bead always fluctuates, so this is not a position trace"
+        )
+    std = float(np.std(arr))
+    if check_units and std > _MAX_PLAUSIBLE_POSITION_STD_M:
+        raise ValueError(
+            f"positions have standard deviation {_g(std)} m, larger than 1 mm: positions look "
+            "like nm or pixels, not metres. Convert to metres (e.g. from_arrays(..., "
+            "position_unit='nm')), or pass check_units=False"
+        )
+    return arr, note
+
+
+def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: bool):
+    try:
+        t = np.asarray(times)
+    except Exception as e:  # pragma: no cover
+        raise ValueError(f"times could not be converted to an array: {e}") from None
+    if t.dtype.kind not in "iuf":
+        raise ValueError(f"times must be numeric [s]; got dtype {t.dtype}")
+    if t.ndim != 1 or t.shape[0] != n:
+        raise ValueError(
+            f"times must be a 1-D array with one time stamp per frame ({n}) [s]; "
+            f"got shape {t.shape}"
+        )
+    t = np.array(t, dtype=np.float64, copy=True)
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise ValueError(
+            f"times contains {bad.size} non-finite value(s) (NaN/inf); first: "
+            f"times[{bad[0]}] = {float(t[bad[0]])!r}"
+        )
+    d = np.diff(t)
+    nonincr = np.flatnonzero(d <= 0)
+    if nonincr.size:
+        i = int(nonincr[0]) + 1
+        raise ValueError(
+            f"times must be strictly increasing; times[{i}] = {float(t[i])!r} s is not after "
+            f"times[{i - 1}] = {float(t[i - 1])!r} s ({nonincr.size} non-increasing step(s) in all)"
+        )
+    med = float(np.median(d))
+    if abs(med - frame_interval) > tol * frame_interval:
+        raise ValueError(
+            f"times imply a frame interval of {_g(med)} s (median step) but frame_interval = "
+            f"{_g(frame_interval)} s; they differ by more than timing_tolerance = {tol:g} "
+            "(relative). Check the units of both (seconds)"
+        )
+    # deviation from the least-squares regular grid t0 + i * dt
+    i = np.arange(n, dtype=np.float64)
+    ic = i - i.mean()
+    slope = float(np.dot(ic, t - t.mean()) / np.dot(ic, ic))
+    resid = (t - t.mean()) - slope * ic
+    jitter = TimingJitter(float(np.std(resid)), float(np.max(np.abs(resid))), slope)
+    if jitter.max_deviation > tol * frame_interval and not allow_irregular:
+        k = int(np.argmax(np.abs(resid)))
+        raise ValueError(
+            f"times are irregular: deviation from a regular grid has std {_g(jitter.std)} s "
+            f"and max {_g(jitter.max_deviation)} s (at times[{k}] = {float(t[k])!r}), i.e. "
+            f"{_g(jitter.max_deviation / frame_interval)} frame intervals > timing_tolerance "
+            f"= {tol:g}. Largest step {_g(d.max())} s, smallest {_g(d.min())} s (dropped "
+            "frames?). Pass allow_irregular=True to keep them (reported in timing_jitter)"
+        )
+    return t, jitter
+
+
+class Recording:
+    r"""One 1-D position trace of a trapped bead and how it was acquired.
+
+    Immutable: arrays are private read-only copies and attributes cannot be set.
+
+    **Arguments:**
+
+    - `positions`: 1-D array of positions [m]. Integer or float32 input is converted to
+      float64 and the original dtype recorded in ``metadata["input_dtype"]``. numpy or JAX.
+    - `frame_interval`: time between frame starts, :math:`\Delta t` [s].
+    - `exposure`: integration time per frame, :math:`W` [s], ``0 < W <= frame_interval``.
+    - `temperature`: [K] (default 295).
+    - `times`: optional frame time stamps [s], strictly increasing and regular to within
+      ``timing_tolerance * frame_interval`` of a regular grid.
+    - `laser_power`: trapping laser power [W], or None when unknown.
+    - `metadata`: free-form JSON-like mapping (stored as a read-only copy).
+    - `name`: optional label.
+    - `allow_irregular`: keep irregular time stamps instead of raising; see `timing_jitter`.
+    - `timing_tolerance`: relative tolerance for time stamps (default 1e-3).
+    - `check_units`: run the unit-slip heuristics (temperature < 100 K, intervals > 1 s,
+      position std > 1 mm, laser power > 10 W). Default True.
+
+    **Raises:** ``ValueError`` for any invalid or implausible input, with the value and a hint.
+    """
+
+    __slots__ = (
+        "_positions",
+        "_frame_interval",
+        "_exposure",
+        "_temperature",
+        "_times",
+        "_laser_power",
+        "_metadata",
+        "_name",
+        "_allow_irregular",
+        "_timing_tolerance",
+        "_check_units",
+        "_jitter",
+    )
+
+    def __init__(
+        self,
+        positions,
+        *,
+        frame_interval,
+        exposure,
+        temperature=DEFAULT_TEMPERATURE,
+        times=None,
+        laser_power=None,
+        metadata=None,
+        name: str | None = None,
+        allow_irregular: bool = False,
+        timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
+        check_units: bool = True,
+    ):
+        check_units = bool(check_units)
+        pos, dtype_note = _positions(positions, check_units)
+
+        dt = _scalar("frame_interval", frame_interval, "s")
+        if dt <= 0:
+            raise ValueError(f"frame_interval must be > 0 [s]; got frame_interval = {dt!r}")
+        if check_units and dt > _MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(
+                f"frame_interval = {dt!r} s is longer than 1 s: this looks like ms, not s "
+                f"(did you mean {dt * 1e-3!r} s?). Pass seconds, or check_units=False"
+            )
+        w = _scalar("exposure", exposure, "s")
+        if w <= 0:
+            raise ValueError(f"exposure must be > 0 [s]; got exposure = {w!r}")
+        if check_units and w > _MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(
+                f"exposure = {w!r} s is longer than 1 s: this looks like ms, not s "
+                f"(did you mean {w * 1e-3!r} s?). Pass seconds, or check_units=False"
+            )
+        if w > dt:
+            raise ValueError(
+                f"exposure = {w!r} s is longer than frame_interval = {dt!r} s; a frame cannot "
+                "integrate longer than the time between frames (expected exposure <= "
+                "frame_interval)"
+            )
+        temp = _scalar("temperature", temperature, "K")
+        if temp <= 0:
+            raise ValueError(f"temperature must be > 0 [K]; got temperature = {temp!r}")
+        if check_units and temp < _MIN_PLAUSIBLE_TEMPERATURE_K:
+            raise ValueError(
+                f"temperature = {temp!r} K is below 100 K: this looks like Celsius; pass "
+                f"kelvin (e.g. {temp + 273.15:.2f} K), or check_units=False"
+            )
+        if laser_power is None:
+            power = None
+        else:
+            power = _scalar("laser_power", laser_power, "W")
+            if power < 0:
+                raise ValueError(f"laser_power must be >= 0 [W]; got laser_power = {power!r}")
+            if check_units and power > _MAX_PLAUSIBLE_LASER_POWER_W:
+                raise ValueError(
+                    f"laser_power = {power!r} W is above 10 W: this looks like mW, not W "
+                    f"(did you mean {power * 1e-3!r} W?). Pass watts, or check_units=False"
+                )
+        tol = _scalar("timing_tolerance", timing_tolerance, "1")
+        if not tol > 0:
+            raise ValueError(f"timing_tolerance must be > 0; got {tol!r}")
+        if name is not None and not isinstance(name, str):
+            raise ValueError(f"name must be a str or None; got {name!r}")
+
+        meta = dict(_freeze({} if metadata is None else metadata))
+        if dtype_note is not None:
+            meta.setdefault("input_dtype", dtype_note)
+        if times is None:
+            t, jitter = None, None
+        else:
+            t, jitter = _timing(times, pos.shape[0], dt, tol, bool(allow_irregular))
+            t.flags.writeable = False
+        pos.flags.writeable = False
+
+        s = object.__setattr__
+        s(self, "_positions", pos)
+        s(self, "_frame_interval", dt)
+        s(self, "_exposure", w)
+        s(self, "_temperature", temp)
+        s(self, "_times", t)
+        s(self, "_laser_power", power)
+        s(self, "_metadata", types.MappingProxyType(meta))
+        s(self, "_name", name)
+        s(self, "_allow_irregular", bool(allow_irregular))
+        s(self, "_timing_tolerance", tol)
+        s(self, "_check_units", check_units)
+        s(self, "_jitter", jitter)
+
+    # -- immutability -------------------------------------------------------------------
+    def __setattr__(self, key, value):
+        raise AttributeError(f"Recording is immutable; use .replace({key.lstrip('_')}=...)")
+
+    def __delattr__(self, key):
+        raise AttributeError("Recording is immutable")
+
+    # -- fields -------------------------------------------------------------------------
+    @property
+    def positions(self) -> np.ndarray:
+        """Positions [m], float64, read-only."""
+        return self._positions
+
+    @property
+    def frame_interval(self) -> float:
+        """Time between frame starts [s]."""
+        return self._frame_interval
+
+    @property
+    def exposure(self) -> float:
+        """Integration time per frame [s]."""
+        return self._exposure
+
+    @property
+    def temperature(self) -> float:
+        """[K]"""
+        return self._temperature
+
+    @property
+    def times(self) -> np.ndarray | None:
+        """Frame time stamps [s] (read-only) or None."""
+        return self._times
+
+    @property
+    def laser_power(self) -> float | None:
+        """Laser power [W] or None."""
+        return self._laser_power
+
+    @property
+    def metadata(self) -> types.MappingProxyType:
+        return self._metadata
+
+    @property
+    def name(self) -> str | None:
+        return self._name
+
+    @property
+    def allow_irregular(self) -> bool:
+        return self._allow_irregular
+
+    @property
+    def timing_tolerance(self) -> float:
+        return self._timing_tolerance
+
+    @property
+    def check_units(self) -> bool:
+        return self._check_units
+
+    # -- derived ------------------------------------------------------------------------
+    @property
+    def n_frames(self) -> int:
+        return int(self._positions.shape[0])
+
+    @property
+    def duration(self) -> float:
+        """Record length ``n_frames * frame_interval`` [s]."""
+        return self.n_frames * self._frame_interval
+
+    @property
+    def sampling_rate(self) -> float:
+        """``1 / frame_interval`` [Hz]."""
+        return 1.0 / self._frame_interval
+
+    @property
+    def timing_jitter(self) -> TimingJitter | None:
+        """Deviation of ``times`` from a regular grid (None without time stamps)."""
+        return self._jitter
+
+    @property
+    def is_regular(self) -> bool:
+        """False only when irregular time stamps were kept with ``allow_irregular=True``."""
+        j = self._jitter
+        return j is None or j.max_deviation <= self._timing_tolerance * self._frame_interval
+
+    def replace(self, **changes: Any) -> Recording:
+        """A new, re-validated Recording with some fields changed."""
+        fields = dict(
+            positions=self._positions,
+            frame_interval=self._frame_interval,
+            exposure=self._exposure,
+            temperature=self._temperature,
+            times=self._times,
+            laser_power=self._laser_power,
+            metadata=self._metadata,
+            name=self._name,
+            allow_irregular=self._allow_irregular,
+            timing_tolerance=self._timing_tolerance,
+            check_units=self._check_units,
+        )
+        unknown = set(changes) - set(fields)
+        if unknown:
+            raise ValueError(f"replace() got unknown field(s) {sorted(unknown)}")
+        fields.update(changes)
+        return Recording(**fields)
+
+    def __eq__(self, other):
+        if not isinstance(other, Recording):
+            return NotImplemented
+        same_times = (self._times is None and other._times is None) or (
+            self._times is not None
+            and other._times is not None
+            and np.array_equal(self._times, other._times)
+        )
+        return (
+            np.array_equal(self._positions, other._positions)
+            and same_times
+            and self._frame_interval == other._frame_interval
+            and self._exposure == other._exposure
+            and self._temperature == other._temperature
+            and self._laser_power == other._laser_power
+            and self._name == other._name
+            and self._allow_irregular == other._allow_irregular
+            and self._timing_tolerance == other._timing_tolerance
+            and self._check_units == other._check_units
+            and self._metadata == other._metadata
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        power = "None" if self._laser_power is None else f"{_g(self._laser_power)} W"
+        return (
+            f"Recording(name={self._name!r}, n_frames={self.n_frames}, "
+            f"frame_interval={_g(self._frame_interval)} s, exposure={_g(self._exposure)} s, "
+            f"temperature={_g(self._temperature)} K, laser_power={power}, "
+            f"times={'yes' if self._times is not None else 'no'})"
+        )

@@ -1,0 +1,202 @@
+"""Recording: construction, immutability, derived properties and every validation error."""
+
+import numpy as np
+import pytest
+
+from blurtrap.data import Recording, TimingJitter
+
+DT = 1e-3
+W = 4e-4
+
+
+def trace(rng, n=200, scale=1e-8):
+    return rng.normal(0.0, scale, n)
+
+
+def make(rng, **kw):
+    args = dict(frame_interval=DT, exposure=W)
+    args.update(kw)
+    pos = args.pop("positions", None)
+    return Recording(trace(rng) if pos is None else pos, **args)
+
+
+def test_fields_and_derived(rng):
+    x = trace(rng, 250)
+    r = Recording(x, frame_interval=DT, exposure=W, temperature=300.0, laser_power=0.05, name="a")
+    assert r.positions.dtype == np.float64
+    np.testing.assert_array_equal(r.positions, x)
+    assert r.n_frames == 250
+    assert r.duration == pytest.approx(0.25, rel=1e-15)
+    assert r.sampling_rate == pytest.approx(1000.0, rel=1e-15)
+    assert (r.frame_interval, r.exposure, r.temperature, r.laser_power) == (DT, W, 300.0, 0.05)
+    assert r.name == "a" and r.times is None and r.timing_jitter is None
+    assert Recording(x, frame_interval=DT, exposure=W).temperature == 295.0
+
+
+def test_immutable_and_private_copy(rng):
+    x = trace(rng)
+    r = Recording(x, frame_interval=DT, exposure=W, metadata={"a": [1, 2]})
+    x[0] = 1.0  # the caller's array is not aliased
+    assert r.positions[0] != 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        r.positions[0] = 0.0
+    with pytest.raises(AttributeError, match="immutable"):
+        r.exposure = 1e-4
+    with pytest.raises(TypeError):
+        r.metadata["b"] = 1
+    assert r.metadata["a"] == (1, 2)
+
+
+def test_replace_revalidates(rng):
+    r = make(rng)
+    r2 = r.replace(exposure=2e-4)
+    assert r2.exposure == 2e-4 and r.exposure == W
+    with pytest.raises(ValueError, match="exposure = 0.002 s is longer than frame_interval"):
+        r.replace(exposure=2e-3)
+
+
+def test_equality(rng):
+    x = trace(rng)
+    a = Recording(x, frame_interval=DT, exposure=W)
+    assert a == Recording(x.copy(), frame_interval=DT, exposure=W)
+    assert a != Recording(x, frame_interval=DT, exposure=W / 2)
+
+
+def test_integer_positions_converted_and_noted(rng):
+    counts = rng.integers(-50, 50, 300)
+    r = Recording(counts, frame_interval=DT, exposure=W, check_units=False)
+    assert r.positions.dtype == np.float64
+    assert r.metadata["input_dtype"] == "int64"
+    np.testing.assert_array_equal(r.positions, counts.astype(float))
+
+
+def test_float32_positions_noted(rng):
+    r = Recording(trace(rng).astype(np.float32), frame_interval=DT, exposure=W)
+    assert r.positions.dtype == np.float64 and r.metadata["input_dtype"] == "float32"
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nonfinite_positions_report_index_and_count(rng, bad):
+    x = trace(rng)
+    x[[7, 42]] = bad
+    with pytest.raises(ValueError, match=r"2 non-finite value\(s\).*index \[7, 42\]"):
+        Recording(x, frame_interval=DT, exposure=W)
+
+
+@pytest.mark.parametrize(
+    "positions, match",
+    [
+        (np.array([1e-8]), "at least 2 frames; got 1"),
+        (np.zeros((3, 4)), r"1-D array .*got shape \(3, 4\)"),
+        (np.float64(1.0), r"1-D array .*got shape \(\)"),
+        (np.full(10, 3e-9), "constant"),
+        (np.array([True, False]), "boolean"),
+        (np.array([1j, 2j]), "complex"),
+        (np.array(["a", "b"]), "numeric"),
+    ],
+)
+def test_bad_positions(positions, match):
+    with pytest.raises(ValueError, match=match):
+        Recording(positions, frame_interval=DT, exposure=W)
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(exposure=0.0), "exposure must be > 0"),
+        (dict(exposure=-1e-4), "exposure must be > 0"),
+        (dict(exposure=2e-3), "exposure = 0.002 s is longer than frame_interval = 0.001 s"),
+        (dict(frame_interval=0.0), "frame_interval must be > 0"),
+        (dict(frame_interval=np.nan), "frame_interval must be finite"),
+        (dict(frame_interval="1e-3"), "frame_interval must be a real scalar"),
+        (dict(exposure=None), "exposure must be a number"),
+        (dict(exposure=True), "exposure must be a number"),
+        (dict(temperature=0.0), "temperature must be > 0"),
+        (dict(temperature=-5.0), "temperature must be > 0"),
+        (dict(temperature=22.0), r"temperature = 22.0 K .*looks like Celsius.*295.15 K"),
+        (dict(frame_interval=5.0, exposure=1e-3), r"frame_interval = 5.0 s .*looks like ms"),
+        (dict(frame_interval=0.01, exposure=0.0), "exposure must be > 0"),
+        (dict(laser_power=-0.1), "laser_power must be >= 0"),
+        (dict(laser_power=100.0), "looks like mW"),
+        (dict(timing_tolerance=0.0), "timing_tolerance must be > 0"),
+        (dict(name=3), "name must be a str"),
+        (dict(metadata={1: "x"}), "metadata keys must be strings"),
+        (dict(metadata={"x": object()}), r"metadata\['x'\] .* has type object"),
+    ],
+)
+def test_bad_scalars(rng, kw, match):
+    with pytest.raises(ValueError, match=match):
+        make(rng, **kw)
+
+
+def test_exposure_in_ms_hint(rng):
+    with pytest.raises(ValueError, match=r"exposure = 2.0 s .*looks like ms.*0.002 s"):
+        make(rng, frame_interval=0.5, exposure=2.0)
+    # with the heuristics off, genuinely slow acquisitions are allowed
+    r = make(rng, frame_interval=5.0, exposure=2.0, check_units=False)
+    assert r.exposure == 2.0
+
+
+def test_exposure_equal_to_frame_interval_is_allowed(rng):
+    assert make(rng, exposure=DT).exposure == DT
+
+
+def test_positions_in_nm_hint(rng):
+    with pytest.raises(ValueError, match="positions look like nm or pixels, not metres"):
+        Recording(trace(rng, scale=20.0), frame_interval=DT, exposure=W)
+    r = Recording(trace(rng, scale=20.0), frame_interval=DT, exposure=W, check_units=False)
+    assert r.n_frames == 200
+
+
+def test_regular_times_and_jitter_property(rng):
+    n = 500
+    t = 10.0 + np.arange(n) * DT + rng.normal(0, 1e-4 * DT, n)  # jitter well inside 1e-3
+    r = make(rng, positions=trace(rng, n), times=t)
+    j = r.timing_jitter
+    assert isinstance(j, TimingJitter)
+    assert 0 < j.std < 2e-4 * DT and j.max_deviation < 1e-3 * DT
+    assert j.fitted_interval == pytest.approx(DT, rel=1e-5)
+    assert r.is_regular
+
+
+def test_irregular_times_error_then_allowed(rng):
+    n = 400
+    t = np.arange(n) * DT
+    t[200:] += DT  # a dropped frame
+    x = trace(rng, n)
+    with pytest.raises(ValueError, match=r"times are irregular: .*std .* s and max .* s"):
+        Recording(x, frame_interval=DT, exposure=W, times=t)
+    r = Recording(x, frame_interval=DT, exposure=W, times=t, allow_irregular=True)
+    assert not r.is_regular
+    assert r.timing_jitter.max_deviation == pytest.approx(0.5 * DT, rel=0.05)
+
+
+def test_nonincreasing_times_report_index_and_values(rng):
+    t = np.arange(200) * DT
+    t[50] = t[49]
+    with pytest.raises(
+        ValueError, match=r"strictly increasing; times\[50\] = 0.049 s is not after times\[49\]"
+    ):
+        make(rng, times=t)
+
+
+@pytest.mark.parametrize(
+    "times, match",
+    [
+        (np.arange(199) * DT, r"one time stamp per frame \(200\)"),
+        (np.where(np.arange(200) == 3, np.nan, np.arange(200) * DT), "times contains 1 non-finite"),
+        (np.arange(200) * 1e-6, r"imply a frame interval of 1e-06 s .*frame_interval = 0.001 s"),
+    ],
+)
+def test_bad_times(rng, times, match):
+    with pytest.raises(ValueError, match=match):
+        make(rng, times=times)
+
+
+def test_accepts_jax_arrays(rng):
+    import jax.numpy as jnp
+
+    x = trace(rng)
+    r = Recording(jnp.asarray(x), frame_interval=jnp.asarray(DT), exposure=W)
+    np.testing.assert_array_equal(r.positions, x)
+    assert isinstance(r.positions, np.ndarray)
