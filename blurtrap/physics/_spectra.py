@@ -51,6 +51,25 @@ def transfer_rect(f, exposure):
     return jnp.sinc(as_float(f) * as_float(exposure)) ** 2
 
 
+def _psd_coeffs(sigma2, tau, w, dt, eps2):
+    """Frequency-independent coefficients of the closed-form discrete PSD (see
+    ``_psd_discrete``); computing them once per recording keeps per-frequency work tiny."""
+    a = w / tau
+    r = dt / tau
+    one_m_rho = -jnp.expm1(-r)
+    rho = jnp.exp(-r)
+    sa = _blur_factor(a)
+    c_a = sigma2 * one_m_rho * (sa * one_m_rho + 2.0 * _rho_b(a, r))
+    c_b = 4.0 * sigma2 * _rho_b_minus_s(a, r)
+    return dt, one_m_rho, rho, c_a, c_b, eps2
+
+
+def _psd_from_coeffs(f, coeffs):
+    dt, one_m_rho, rho, c_a, c_b, eps2 = coeffs
+    s2 = jnp.sin(jnp.pi * f * dt) ** 2
+    return dt * ((c_a - s2 * c_b) / (one_m_rho**2 + 4.0 * rho * s2) + eps2)
+
+
 def _psd_discrete(f, sigma2, tau, w, dt, eps2):
     """Closed-form aliased, blurred, noisy discrete two-sided PSD, no input checks.
 
@@ -59,15 +78,7 @@ def _psd_discrete(f, sigma2, tau, w, dt, eps2):
     an algebraically exact rearrangement of DESIGN item 5 with no cancellation for small
     alpha, small dt/tau or large alpha.
     """
-    a = w / tau
-    r = dt / tau
-    one_m_rho = -jnp.expm1(-r)
-    rho = jnp.exp(-r)
-    s2 = jnp.sin(jnp.pi * f * dt) ** 2
-    sa = _blur_factor(a)
-    num = one_m_rho * (sa * one_m_rho + 2.0 * _rho_b(a, r)) - 4.0 * s2 * _rho_b_minus_s(a, r)
-    den = one_m_rho**2 + 4.0 * rho * s2
-    return dt * (sigma2 * num / den + eps2)
+    return _psd_from_coeffs(f, _psd_coeffs(sigma2, tau, w, dt, eps2))
 
 
 def _psd_blurred(f, sigma2, tau, w):
