@@ -27,6 +27,35 @@ from .physics import (
     variance_general as variance_general,
 )
 
+from .data import (
+    Recording as Recording,
+    RecordingSet as RecordingSet,
+    from_arrays as from_arrays,
+    load as load,
+    load_csv as load_csv,
+    load_manifest as load_manifest,
+    load_npz as load_npz,
+    save_manifest as save_manifest,
+    save_npz as save_npz,
+)
+from .inference import (
+    CalibrationResult as CalibrationResult,
+    FitError as FitError,
+    TrapModel as TrapModel,
+    calibrate as calibrate,
+)
+from .simulate import (
+    ExponentialProfile as ExponentialProfile,
+    ExposureWindows as ExposureWindows,
+    RandomWalkDrift as RandomWalkDrift,
+    SinusoidDrift as SinusoidDrift,
+    SubstepBiasWarning as SubstepBiasWarning,
+    TrackingNoise as TrackingNoise,
+    TrapezoidProfile as TrapezoidProfile,
+    quartic_force as quartic_force,
+    simulate as simulate,
+)
+
 try:
     __version__ = _version("blurtrap")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree

@@ -1,1 +1,17 @@
-"""blurtrap.inference"""
+"""Estimators: variances, spectra, exact and Whittle likelihoods, joint fits."""
+
+from ._calibrate import calibrate as calibrate, moment_start as moment_start
+from ._fit import FitOutput as FitOutput, fit_ml as fit_ml, fit_ml_batch as fit_ml_batch
+from ._likelihood import (
+    arma_loglik as arma_loglik,
+    block_periodogram as block_periodogram,
+    periodogram as periodogram,
+    whittle_loglik as whittle_loglik,
+)
+from ._models import TrapModel as TrapModel, get_model as get_model
+from ._result import CalibrationResult as CalibrationResult, FitError as FitError
+from ._variance import (
+    drift_extrapolation as drift_extrapolation,
+    empirical_variance_se as empirical_variance_se,
+    highpass_variance_curve as highpass_variance_curve,
+)

@@ -18,14 +18,16 @@ from ._checks import as_float, check_nonnegative, check_positive, is_concrete
 from ._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 # Below this alpha the closed form loses digits to cancellation; the Taylor series
-# S = sum_n 2 (-a)^n / (n+2)! is used instead. 18 terms at a = 0.5 truncate at ~1e-22.
-_SERIES_CUT = 0.5
-_N_TERMS = 18
+# S = sum_n 2 (-a)^n / (n+2)! is used instead. 10 terms at a = 0.1 truncate at ~1e-19, and the
+# closed form loses at most ~20 ulp at a = 0.1. (Few terms keep the compiled Hessians small.)
+_SERIES_CUT = 0.1
+_N_TERMS = 10
 _S_COEFFS = tuple(2.0 * (-1.0) ** n / math.factorial(n + 2) for n in range(_N_TERMS))
 # phi1(a) = (1 - exp(-a)) / a = sum_n (-a)^n / (n+1)!
 _PHI1_COEFFS = tuple((-1.0) ** n / math.factorial(n + 1) for n in range(_N_TERMS))
-# (sinh(a) - a) / a^2 = sum_{m>=0} a^(2m+1) / (2m+3)!  (used for B - S)
-_SH_COEFFS = tuple(1.0 / math.factorial(2 * m + 3) for m in range(_N_TERMS // 2))
+# (sinh(a) - a) / (a^3) = sum_{m>=0} a^(2m) / (2m+3)!  (B - S for a < 1; 9 terms: < 1e-19)
+_BMS_CUT = 1.0
+_SH_COEFFS = tuple(1.0 / math.factorial(2 * m + 3) for m in range(9))
 
 
 def _horner(x, coeffs):
@@ -35,9 +37,14 @@ def _horner(x, coeffs):
     return acc
 
 
-def _split(a, cut=_SERIES_CUT):
+def _split(a, cut=None):
     """Safe arguments for the series (small) and closed-form (large) branches, so that
-    neither branch produces inf/NaN that could leak into gradients through ``jnp.where``."""
+    neither branch produces inf/NaN that could leak into gradients through ``jnp.where``.
+
+    The cut is 0.1 in float64 and 1.0 in lower precision (where 10 terms still truncate
+    below float32 resolution and the closed form would lose ~20 ulp at 0.1)."""
+    if cut is None:
+        cut = _SERIES_CUT if jnp.finfo(a.dtype).bits >= 64 else 1.0
     small = a < cut
     return small, jnp.where(small, a, 0.0), jnp.where(small, 1.0, a)
 
@@ -57,15 +64,9 @@ def _phi1(a):
     return jnp.where(small, _horner(a_s, _PHI1_COEFFS), -jnp.expm1(-a_l) / a_l)
 
 
-def _b_minus_s(a):
-    """B(a) - S(a) = 2 (sinh a - a) / a^2 for a <= ~700, computed without cancellation.
-
-    Only used multiplied by rho = exp(-dt/tau) <= exp(-a); see ``_rho_b_minus_s``.
-    """
-    small, a_s, a_l = _split(a)
-    series = 2.0 * _horner(a_s * a_s, _SH_COEFFS) * a_s
-    closed = 2.0 * (jnp.sinh(a_l) - a_l) / (a_l * a_l)
-    return jnp.where(small, series, closed)
+def _b_minus_s_series(a):
+    """B(a) - S(a) = 2 (sinh a - a)/a^2 = 2 a sum_m a^(2m)/(2m+3)!, for 0 <= a < 1."""
+    return 2.0 * a * _horner(a * a, _SH_COEFFS)
 
 
 def _rho_b(a, r):
@@ -76,15 +77,19 @@ def _rho_b(a, r):
     return _phi1(a) ** 2 * jnp.exp(a - r)
 
 
-def _rho_b_minus_s(a, r):
-    """rho * (B(a) - S(a)), stable for small and large a."""
-    small = a < 1.0
-    a_s = jnp.where(small, a, 0.0)
-    direct = jnp.exp(-r) * _b_minus_s(a_s)
-    # large a: rho B computed stably, minus rho S (no cancellation issue: B >> S).
-    a_l = jnp.where(small, 1.0, a)
-    r_l = jnp.where(small, 1.0, r)
-    large = _rho_b(a_l, r_l) - jnp.exp(-r_l) * _blur_factor(a_l)
+def _rho_b_minus_s(a, r, s=None, rho_b=None):
+    """rho * (B(a) - S(a)), stable for small and large a.
+
+    ``s = S(a)`` and ``rho_b = rho B(a)`` may be passed in when already computed.
+    """
+    small = a < _BMS_CUT
+    direct = jnp.exp(-r) * _b_minus_s_series(jnp.where(small, a, 0.0))
+    if s is None:
+        s = _blur_factor(a)
+    if rho_b is None:
+        rho_b = _rho_b(a, r)
+    # a >= 1: rho B - rho S has no cancellation trouble (B - S >= 0.33 B there)
+    large = rho_b - jnp.exp(-r) * s
     return jnp.where(small, direct, large)
 
 

@@ -59,8 +59,9 @@ def _psd_coeffs(sigma2, tau, w, dt, eps2):
     one_m_rho = -jnp.expm1(-r)
     rho = jnp.exp(-r)
     sa = _blur_factor(a)
-    c_a = sigma2 * one_m_rho * (sa * one_m_rho + 2.0 * _rho_b(a, r))
-    c_b = 4.0 * sigma2 * _rho_b_minus_s(a, r)
+    rho_b = _rho_b(a, r)
+    c_a = sigma2 * one_m_rho * (sa * one_m_rho + 2.0 * rho_b)
+    c_b = 4.0 * sigma2 * _rho_b_minus_s(a, r, sa, rho_b)
     return dt, one_m_rho, rho, c_a, c_b, eps2
 
 

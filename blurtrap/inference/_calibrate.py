@@ -1,0 +1,464 @@
+"""``blurtrap.calibrate``: every method of the paper plus exact and Whittle likelihoods."""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._config import float64_scope, warn_if_float32
+from ..physics._constants import BOLTZMANN
+from ._fit import chi2_sf, fit_ml
+from ._models import TrapModel, get_model
+from ._problems import (
+    ExactArgs,
+    SpectralArgs,
+    exact_nll,
+    make_layout,
+    rec_meta,
+    spectral_model_psd,
+    spectral_nll,
+)
+from ._result import CalibrationResult, FitError
+from ._variance import VarianceArgs, empirical_variance_se, fit_variances
+
+METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
+           "equipartition")
+
+
+def as_recordings(data) -> list:
+    """Accept a Recording, a RecordingSet, a sequence of Recordings or a path."""
+    if isinstance(data, (str, os.PathLike)):
+        from ..data import load
+
+        data = load(data)
+    if hasattr(data, "positions") and hasattr(data, "frame_interval"):
+        recs = [data]
+    else:
+        try:
+            recs = list(data)
+        except TypeError:
+            raise TypeError(
+                "data must be a Recording, a RecordingSet, a list of Recordings or a manifest "
+                f"path; got {type(data).__name__}. Wrap arrays with blurtrap.from_arrays(...)."
+            ) from None
+    if not recs:
+        raise ValueError("data holds no recordings")
+    for r in recs:
+        if not (hasattr(r, "positions") and hasattr(r, "frame_interval")):
+            raise TypeError(f"expected Recording objects; got {type(r).__name__}")
+        warn_if_float32("positions", r.positions)
+    return recs
+
+
+# ------------------------------------------------------------------------------------------
+# start values from closed forms (host-side numpy: no JAX dispatch or compilation)
+# ------------------------------------------------------------------------------------------
+def _np_blur_factor(a: float) -> float:
+    if a < 1e-3:
+        return 1.0 - a / 3.0 + a * a / 12.0 - a**3 / 60.0
+    return 2.0 / a * (1.0 + math.expm1(-a) / a)
+
+
+def _np_rho_b(a: float, r: float) -> float:
+    phi1 = 1.0 - a / 2.0 + a * a / 6.0 if a < 1e-6 else -math.expm1(-a) / a
+    return phi1 * phi1 * math.exp(a - r)
+
+
+def _np_periodogram(y, dt, n_blocks=1):
+    y = np.asarray(y, dtype=float)
+    m = y.size // n_blocks
+    if m < 4:
+        raise ValueError(
+            f"n_blocks = {n_blocks} leaves {m} frames per block for a record of {y.size} "
+            "frames; need at least 4 frames per block"
+        )
+    blocks = y[: m * n_blocks].reshape(n_blocks, m)
+    blocks = blocks - blocks.mean(axis=1, keepdims=True)
+    spec = np.fft.rfft(blocks, axis=1)[:, 1:]
+    p = (spec.real**2 + spec.imag**2).mean(axis=0) * dt / m
+    f = np.arange(1, m // 2 + 1) / (m * dt)
+    return f, p, m
+
+
+def moment_start(rec):
+    """Closed-form moment estimate of (k, gamma, eps2) from lags 0, 1, 2.
+
+    In the model ``C(2)/C(1) = rho`` exactly (blur and noise cancel), ``C(1) = sigma2 B rho``
+    and ``C(0) = sigma2 S + eps2``; the estimate is clipped into the physical range and falls
+    back to ``tau = dt`` when lag correlations are not resolved (dt >> tau).
+    Returns ``(k, gamma, eps2, rho_hat)``.
+    """
+    y = np.asarray(rec.positions, dtype=float)
+    y = y - y.mean()
+    n = y.size
+    c0 = float(np.mean(y * y))
+    c1 = float(np.mean(y[1:] * y[:-1])) if n > 2 else 0.0
+    c2 = float(np.mean(y[2:] * y[:-2])) if n > 3 else 0.0
+    dt, w, t = float(rec.frame_interval), float(rec.exposure), float(rec.temperature)
+    kt = BOLTZMANN * t
+    rho = c2 / c1 if c1 > 0 else 0.0
+    if not (0.02 < rho < 0.99999) or c1 <= 0:
+        rho_used = min(max(rho, 0.05), 0.99999) if c1 > 0 else math.exp(-1.0)
+    else:
+        rho_used = rho
+    tau = -dt / math.log(rho_used)
+    a, r = w / tau, dt / tau
+    sigma2 = c1 / _np_rho_b(a, r) if c1 > 0 else c0
+    s = _np_blur_factor(a)
+    sigma2 = min(max(sigma2, 0.3 * c0 / s), 3.0 * c0 / s)
+    eps2 = c0 - sigma2 * s
+    eps2 = max(eps2, 0.02 * c0)
+    k = kt / sigma2
+    return k, k * tau, eps2, rho
+
+
+def _start_vector(recs, layout, noise):
+    starts = np.array([moment_start(r)[:3] for r in recs])
+    ks = starts[:, 0]
+    if layout.linear_power:
+        kvec = [np.median(ks / np.asarray(layout.power))]
+    else:
+        idx = np.asarray(layout.k_index)
+        kvec = [np.median(ks[idx == j]) for j in range(layout.n_k)]
+    vec = list(kvec) + [np.median(starts[:, 1])]
+    if noise:
+        vec.append(np.median(starts[:, 2]))
+    return jnp.asarray(np.array(vec, dtype=float))
+
+
+# ------------------------------------------------------------------------------------------
+# goodness of fit
+# ------------------------------------------------------------------------------------------
+def spectral_gof(ratio, weight, n_params, min_dof=64):
+    """Binned test of periodogram/model ratios (each has mean 1, variance 1/n_blocks).
+
+    ``ratio`` and ``weight`` have shape (R, M) (weight 0 on padding). Consecutive ordinates
+    of each recording are pooled into bins worth >= ``min_dof`` exponential degrees of
+    freedom, so each bin mean is close to normal with variance 1/(bin weight);
+    ``T = sum_b W_b (mean_b - 1)^2 ~ chi^2(n_bins - n_params)``.
+    """
+    ratio, weight = np.asarray(ratio), np.asarray(weight)
+    stat, nb = 0.0, 0
+    for q, wt in zip(ratio, weight):
+        keep = wt > 0
+        q, wt = q[keep], wt[keep]
+        if q.size == 0:
+            continue
+        per = max(1, int(math.ceil(min_dof / float(np.median(wt)))))
+        nbin = len(q) // per
+        if nbin == 0:
+            continue
+        qb = q[: nbin * per].reshape(nbin, per)
+        wb = wt[: nbin * per].reshape(nbin, per)
+        means = np.sum(qb * wb, axis=1) / np.sum(wb, axis=1)
+        stat += float(np.sum(np.sum(wb, axis=1) * (means - 1.0) ** 2))
+        nb += nbin
+    dof = max(nb - n_params, 1)
+    p = float(chi2_sf(stat, dof))
+    return {"test": "binned spectral chi2", "statistic": stat, "dof": dof, "p_value": p}
+
+
+# ------------------------------------------------------------------------------------------
+# spectral (Whittle / blocked) and exact likelihood fits
+# ------------------------------------------------------------------------------------------
+def _spectral_args(recs, layout, model, n_blocks, f_range):
+    fs, ps, ws = [], [], []
+    for r in recs:
+        nb = max(int(n_blocks), 1)
+        f, p, m = _np_periodogram(r.positions, float(r.frame_interval), nb)
+        wt = np.full(f.shape, float(nb))
+        if m % 2 == 0:
+            wt[-1] *= 0.5  # Nyquist ordinate is chi^2_1
+        if f_range is not None:
+            sel = (f >= f_range[0]) & (f <= f_range[1])
+            f, p, wt = f[sel], p[sel], wt[sel]
+        fs.append(f)
+        ps.append(p)
+        ws.append(wt)
+    m_max = max(len(f) for f in fs)
+    if m_max == 0:
+        raise ValueError(f"f_range = {f_range} Hz leaves no frequencies to fit")
+    ref = float(np.mean(np.concatenate(ps)))
+
+    def pad(arrs, fill):
+        return np.stack([np.concatenate([a, np.full(m_max - len(a), fill)]) for a in arrs])
+
+    dts = np.array([float(r.frame_interval) for r in recs])
+    f2 = pad([f for f in fs], 0.0)
+    f2 = np.where(f2 == 0.0, 0.25 / dts[:, None], f2)  # harmless value on padding
+    return SpectralArgs(
+        layout=layout,
+        model=model,
+        meta=rec_meta(recs),
+        f=jnp.asarray(f2),
+        s2=jnp.asarray(np.sin(np.pi * f2 * dts[:, None]) ** 2),
+        power=jnp.asarray(pad(ps, ref)),
+        weight=jnp.asarray(pad(ws, 0.0)),
+        log_ref=jnp.asarray(np.log(ref)),
+    )
+
+
+_psd_jit = eqx.filter_jit(spectral_model_psd)
+
+
+def _check_fit(out, names, method):
+    if not bool(out.converged):
+        raise FitError(
+            f"{method} fit did not converge after {int(out.n_steps)} steps "
+            f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
+            "Try another method or check the data (drift, wrong exposure/frame interval)."
+        )
+    if not bool(out.hessian_pd):
+        raise FitError(
+            f"{method} fit: the Fisher information is singular - the parameters {names} are "
+            "not all identifiable from these data (e.g. dt >> tau leaves no temporal "
+            "information; use recordings at several exposures or powers)"
+        )
+
+
+def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None):
+    values = np.asarray(values, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    names = layout.names
+    nk = 1 if layout.linear_power else layout.n_k
+    if layout.linear_power:
+        powers = np.asarray(layout.power)
+        k_rec = values[0] * powers
+        k_err = np.sqrt(cov[0, 0]) * powers
+    else:
+        idx = np.asarray(layout.k_index)
+        k_rec = values[:nk][idx]
+        k_err = np.sqrt(np.clip(np.diag(cov)[:nk], 0, None))[idx]
+    at_bounds = []
+    if layout.noise:
+        c0 = np.mean([np.var(np.asarray(r.positions)) for r in recs])
+        if values[-1] < 1e-6 * c0:
+            at_bounds.append("tracking_var")
+    temps = {float(r.temperature) for r in recs}
+    return CalibrationResult(
+        method=method,
+        model=model.name,
+        param_names=tuple(names),
+        values=values,
+        covariance=cov,
+        temperature=float(recs[0].temperature) if len(temps) == 1 else float(np.mean(list(temps))),
+        k_per_recording=np.asarray(k_rec, dtype=float),
+        k_per_recording_err=np.asarray(k_err, dtype=float),
+        gof=gof,
+        n_recordings=len(recs),
+        n_frames=int(sum(r.n_frames for r in recs)),
+        converged=True,
+        at_bounds=tuple(at_bounds),
+        notes=tuple(notes),
+        extras=extras or {},
+    )
+
+
+def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes):
+    args = _spectral_args(recs, layout, model, n_blocks, f_range)
+    scale = _start_vector(recs, layout, model.noise)
+    out = fit_ml(spectral_nll, scale, args)
+    _check_fit(out, layout.names, method_name)
+    psd = _psd_jit(out.value, args)
+    gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
+    extras = {"n_blocks": n_blocks, "nll": float(out.nll)}
+    return _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras)
+
+
+def _fit_exact(recs, layout, model, notes):
+    ys = tuple(jnp.asarray(np.asarray(r.positions, dtype=float)) for r in recs)
+    args = ExactArgs(layout=layout, model=model, meta=rec_meta(recs), ys=ys)
+    # start from the (cheap, asymptotically equivalent) Whittle estimate
+    sargs = _spectral_args(recs, layout, model, 1, None)
+    scale = _start_vector(recs, layout, model.noise)
+    wout = fit_ml(spectral_nll, scale, sargs)
+    if bool(wout.success):
+        scale = wout.value
+    out = fit_ml(exact_nll, scale, args)
+    _check_fit(out, layout.names, "likelihood (exact)")
+    # goodness of fit on the periodogram against this fit's own spectrum
+    psd = _psd_jit(out.value, sargs)
+    gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
+    extras = {"loglik": -float(out.nll)}
+    return _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras)
+
+
+def _default_k_mode(recs):
+    powers = [r.laser_power for r in recs]
+    if all(p is not None for p in powers) and len({float(p) for p in powers}) > 1:
+        return "per_power"
+    return "shared"
+
+
+def _fit_variance(recs, layout, model, method_name, notes):
+    if len(recs) < len(layout.names):
+        raise ValueError(
+            f"{method_name} needs at least {len(layout.names)} recordings to fit "
+            f"{layout.names}; got {len(recs)}"
+        )
+    v = np.array([np.var(np.asarray(r.positions, dtype=float)) for r in recs])
+    n = np.array([float(r.n_frames) for r in recs])
+    args = VarianceArgs(layout=layout, model=model, meta=rec_meta(recs), v=jnp.asarray(v),
+                        n=jnp.asarray(n), se=jnp.asarray(v * np.sqrt(2.0 / n)))
+    scale = _start_vector(recs, layout, model.noise)
+    p, cov, chi2, ok, pd = fit_variances(args, scale)
+    if not bool(ok):
+        raise FitError(f"{method_name}: least squares did not converge; parameters {layout.names}")
+    if not bool(pd):
+        raise FitError(
+            f"{method_name}: parameters {layout.names} are not identifiable from these "
+            "variances (need exposures spanning alpha ~ 0.3-10, or several powers)"
+        )
+    dof = max(len(recs) - len(layout.names), 0)
+    gof = {"test": "weighted chi2 of variances", "statistic": float(chi2), "dof": dof,
+           "p_value": float(chi2_sf(float(chi2), dof)) if dof > 0 else float("nan")}
+    return _assemble(recs, layout, model, method_name, p, cov, gof, notes)
+
+
+def _equipartition(recs, diffusion, pade):
+    ks, kerr = [], []
+    notes = []
+    for r in recs:
+        v, se = empirical_variance_se(r.positions)
+        kt = BOLTZMANN * float(r.temperature)
+        if diffusion is None:
+            k = kt / v
+            ks.append(k)
+            kerr.append(k * se / v)
+        else:
+            from ..physics._blur import stiffness_from_variance
+
+            meth = "pade" if pade else "exact"
+            k = float(stiffness_from_variance(v, diffusion, float(r.exposure), float(r.temperature),
+                                              method=meth))
+            h = v * 1e-6
+            dk = (float(stiffness_from_variance(v + h, diffusion, float(r.exposure),
+                                                float(r.temperature), method=meth)) - k) / h
+            ks.append(k)
+            kerr.append(abs(dk) * se)
+    if diffusion is None:
+        notes.append("naive equipartition k = kT/var(X_m): biased low by motion blur "
+                     "(var is reduced by S(alpha)) and high by tracking noise")
+        gamma, gerr = math.nan, math.nan
+    else:
+        notes.append(f"blur-corrected equipartition with given D = {diffusion:.4g} m^2/s "
+                     f"({'Pade' if pade else 'exact'} inversion)")
+        gamma = BOLTZMANN * float(recs[0].temperature) / diffusion
+        gerr = 0.0
+    names = tuple(f"k[{i}]" for i in range(len(recs))) if len(recs) > 1 else ("k",)
+    values = np.array(ks + ([gamma] if diffusion is not None else []))
+    errs = np.array(kerr + ([gerr] if diffusion is not None else []))
+    names = names + (("gamma",) if diffusion is not None else ())
+    return CalibrationResult(
+        method="equipartition",
+        model="naive" if diffusion is None else "blur",
+        param_names=names,
+        values=values,
+        covariance=np.diag(errs**2),
+        temperature=float(recs[0].temperature),
+        k_per_recording=np.array(ks),
+        k_per_recording_err=np.array(kerr),
+        gof={},
+        n_recordings=len(recs),
+        n_frames=int(sum(r.n_frames for r in recs)),
+        notes=tuple(notes),
+    )
+
+
+@float64_scope
+def calibrate(
+    data,
+    *,
+    method: str = "auto",
+    model=None,
+    k: str | None = None,
+    likelihood: str = "auto",
+    n_blocks: int | None = None,
+    f_range=None,
+    diffusion: float | None = None,
+    pade: bool = False,
+) -> CalibrationResult:
+    """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
+
+    **Arguments:**
+
+    - `data`: a ``Recording``, ``RecordingSet``, list of recordings or a manifest path.
+    - `method`: ``"auto"`` (the most informative method the data allow; the choice is in
+      ``result.notes``), ``"likelihood"`` (joint exact or Whittle likelihood), ``"psd"``
+      (blocked power spectrum, Gamma maximum likelihood, appendix C), ``"variance_vs_exposure"``
+      (section 6.2), ``"variance_vs_power"`` (section 6.3, k = c P), ``"equipartition"``
+      (naive, or blur-corrected when ``diffusion`` is given).
+    - `model`: ``"standard"`` (default: blur + aliasing + tracking noise), ``"blur"``,
+      ``"naive"``, ``"naive_aliased"``, or a ``TrapModel``.
+    - `k`: how stiffness is shared across recordings: ``"shared"``, ``"per_recording"``,
+      ``"per_power"``, ``"linear_power"`` (default: per power when powers differ).
+    - `likelihood`: ``"exact"`` (O(N) time-domain, REML mean), ``"whittle"`` or ``"auto"``
+      (Whittle above 2^14 frames per recording, where the two agree to well within errors).
+    - `n_blocks`: blocks for ``method="psd"`` (default: 128 blocks, at least 64 frames each).
+    - `f_range`: ``(f_min, f_max)`` [Hz] fitted in the spectral methods.
+    - `diffusion`, `pade`: for blur-corrected equipartition.
+
+    **Returns:** :class:`CalibrationResult` (SI units).
+
+    **Raises:** ``FitError`` when a fit does not converge or is not identifiable;
+    ``ValueError`` for bad arguments.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got method = {method!r}")
+    if likelihood not in ("auto", "exact", "whittle"):
+        raise ValueError(f"likelihood must be 'auto', 'exact' or 'whittle'; got {likelihood!r}")
+    recs = as_recordings(data)
+    mdl: TrapModel = get_model(model)
+    notes: list[str] = []
+
+    if method == "equipartition":
+        return _equipartition(recs, diffusion, pade)
+
+    if method == "auto":
+        rhos = [moment_start(r)[3] for r in recs]
+        informative = [rh > 0.05 for rh in rhos]
+        if any(informative):
+            method = "likelihood"
+            notes.append("auto: frames resolve the trap relaxation (lag correlation rho = "
+                         f"{max(rhos):.3g}); using the joint likelihood")
+        elif len({float(r.exposure) for r in recs}) >= 3:
+            method = "variance_vs_exposure"
+            notes.append("auto: dt >> tau (no temporal information); using variance vs "
+                         "exposure")
+        elif len({r.laser_power for r in recs if r.laser_power is not None}) >= 3:
+            method = "variance_vs_power"
+            notes.append("auto: dt >> tau; using variance vs laser power (k = c P)")
+        else:
+            raise FitError(
+                "these recordings cannot identify gamma: frames are uncorrelated (dt >> tau) "
+                "and there are fewer than 3 exposures or laser powers. Give the diffusion "
+                "coefficient (method='equipartition', diffusion=D) or record an exposure series."
+            )
+
+    if k is None:
+        k = "linear_power" if method == "variance_vs_power" else _default_k_mode(recs)
+    layout = make_layout(recs, k, mdl.noise)
+
+    if method == "likelihood":
+        use = likelihood
+        if use == "auto":
+            use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
+        notes.append(f"likelihood: {use}")
+        if use == "exact":
+            return _fit_exact(recs, layout, mdl, notes)
+        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes)
+    if method == "psd":
+        nb = n_blocks
+        if nb is None:
+            nb = max(1, min(128, min(r.n_frames for r in recs) // 64))
+        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes)
+    if method in ("variance_vs_exposure", "variance_vs_power"):
+        if method == "variance_vs_power" and k != "linear_power":
+            warnings.warn("variance_vs_power is usually run with k='linear_power'", stacklevel=2)
+        return _fit_variance(recs, layout, mdl, method, notes)
+    raise AssertionError(method)  # pragma: no cover

@@ -1,0 +1,138 @@
+"""Generic maximum-likelihood machinery: optimistix Newton on the score in log parameters
+(BFGS fallback), observed-Fisher covariance in natural parameters, result codes.
+
+Every parameter handled here is positive (k, gamma, eps^2, c ...). The optimiser works in
+``x = log(p / scale)`` (O(1) unknowns, positivity by construction); the covariance is the
+inverse Hessian of the negative log-likelihood with respect to the *natural* parameters
+(scaled to O(1) for conditioning), so that a parameter at its lower bound 0 (eps^2) still gets
+a finite, meaningful standard error.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+
+class FitOutput(eqx.Module):
+    value: jax.Array  # natural parameters
+    cov: jax.Array  # covariance of natural parameters
+    nll: jax.Array
+    grad_norm: jax.Array
+    n_steps: jax.Array
+    success: jax.Array  # bool: optimiser converged and Hessian positive definite
+    converged: jax.Array
+    hessian_pd: jax.Array
+
+
+def _finish(f, x, args, scale, converged, n_steps):
+    """Assemble a FitOutput at ``x``: observed Fisher information in natural (scaled)
+    parameters u = exp(x), from the log-space Hessian: d2f/du2 = (H_x - diag(grad_x))/(u u^T).
+    """
+    h_x = jax.hessian(f)(x, args)
+    grad_x = jax.grad(f)(x, args)
+    u_hat = jnp.exp(x)
+    hess = (h_x - jnp.diag(grad_x)) / (u_hat[:, None] * u_hat[None, :])
+    hess = 0.5 * (hess + hess.T)
+    evals = jnp.linalg.eigvalsh(hess)
+    pd = jnp.all(evals > 0) & jnp.all(jnp.isfinite(evals))
+    cov = jnp.linalg.inv(hess) * scale[:, None] * scale[None, :]
+    cov = jnp.where(pd, cov, jnp.nan)
+    return FitOutput(
+        value=scale * u_hat,
+        cov=cov,
+        nll=f(x, args),
+        grad_norm=jnp.max(jnp.abs(grad_x)),
+        n_steps=n_steps,
+        success=converged & pd,
+        converged=converged,
+        hessian_pd=pd,
+    )
+
+
+def _log_objective(nll, scale):
+    def f(x, a):
+        return nll(scale * jnp.exp(x), a)
+
+    return f
+
+
+def _newton(nll, scale, args, rtol, atol):
+    """Newton on the score (optimistix root find; exact Hessian; ~4 steps from the
+    closed-form start). Reported as converged only if it also lowered the objective."""
+    f = _log_objective(nll, scale)
+    x0 = jnp.zeros_like(scale)
+    sol = optx.root_find(
+        jax.grad(f), optx.Newton(rtol=rtol, atol=atol), x0, args=args, max_steps=64, throw=False
+    )
+    x = sol.value
+    ok = (
+        (sol.result == optx.RESULTS.successful)
+        & jnp.all(jnp.isfinite(x))
+        & (f(x, args) <= f(x0, args))
+    )
+    x = jnp.where(ok, x, x0)
+    return f, x, ok, sol.stats["num_steps"]
+
+
+def _bfgs(nll, scale, args, rtol, atol, max_steps):
+    """BFGS minimisation with line search: the robust fallback."""
+    f = _log_objective(nll, scale)
+    sol = optx.minimise(
+        f, optx.BFGS(rtol=rtol, atol=atol), jnp.zeros_like(scale), args=args,
+        max_steps=max_steps, throw=False,
+    )
+    return f, sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+
+
+@eqx.filter_jit
+def _newton_jit(nll, scale, args, rtol, atol):
+    f, x, ok, n = _newton(nll, scale, args, rtol, atol)
+    return _finish(f, x, args, scale, ok, n)
+
+
+@eqx.filter_jit
+def _bfgs_jit(nll, scale, args, rtol, atol, max_steps):
+    f, x, ok, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
+    return _finish(f, x, args, scale, ok, n)
+
+
+def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOutput:
+    """Minimise ``nll(p, args)`` over positive ``p`` starting at ``p = scale``.
+
+    Newton on the score first; if it fails (or lands on a non-minimum) BFGS takes over,
+    compiled only when needed. ``nll`` must be a pure, module-level JAX function: calls with
+    arrays of the same shapes reuse the compiled code.
+    """
+    out = _newton_jit(nll, scale, args, rtol, atol)
+    if not (bool(out.converged) and bool(out.hessian_pd)):
+        out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
+    return out
+
+
+@eqx.filter_jit
+def fit_ml_batch(nll, scale, args, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOutput:
+    """``fit_ml`` vmapped over a leading batch axis of ``scale`` and ``args``; every item
+    gets its own status (one failure does not abort the batch). Newton with an in-graph
+    BFGS fallback for items where Newton failed."""
+
+    def one(s, a):
+        f, x_n, ok, n_n = _newton(nll, s, a, rtol, atol)
+
+        def fallback(_):
+            _, x_b, ok_b, n_b = _bfgs(nll, s, a, rtol, atol, max_steps)
+            return x_b, ok_b, n_b
+
+        x, ok2, n = jax.lax.cond(ok, lambda _: (x_n, ok, n_n), fallback, None)
+        return _finish(f, x, a, s, ok2, n)
+
+    return jax.vmap(one)(scale, args)
+
+
+def chi2_sf(x, dof):
+    """Survival function of chi^2 with ``dof`` degrees of freedom (regularised gamma)."""
+    return jax.scipy.special.gammaincc(0.5 * dof, 0.5 * x)

@@ -1,0 +1,161 @@
+"""Calibration results: immutable, on the host, JSON-able in SI units."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from ..physics._constants import BOLTZMANN
+
+LAB = {  # name: (factor from SI, lab unit)
+    "k": (1e3, "pN/nm"),
+    "c": (1.0, "pN/nm/W"),
+    "gamma": (1e6, "pN s/um"),
+    "diffusion": (1e12, "um^2/s"),
+    "tracking_var": (1e18, "nm^2"),
+    "tau": (1e3, "ms"),
+    "corner_frequency": (1.0, "Hz"),
+}
+
+
+class FitError(RuntimeError):
+    """A fit did not converge or its Fisher matrix is singular; the message says which."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrationResult:
+    """Calibrated trap parameters with standard errors (SI units).
+
+    ``params``/``errors`` map parameter names (``k`` or ``k[...]``/``c``, ``gamma``,
+    ``tracking_var``) to values; ``covariance`` is in the order of ``param_names``.
+    """
+
+    method: str
+    model: str
+    param_names: tuple[str, ...]
+    values: np.ndarray
+    covariance: np.ndarray
+    temperature: float
+    k_per_recording: np.ndarray
+    k_per_recording_err: np.ndarray
+    gof: dict
+    n_recordings: int
+    n_frames: int
+    converged: bool = True
+    at_bounds: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    extras: dict = dataclasses.field(default_factory=dict)
+
+    # ---- access -----------------------------------------------------------------------
+    @property
+    def errors(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+
+    @property
+    def params(self) -> dict[str, float]:
+        return dict(zip(self.param_names, map(float, self.values)))
+
+    def _get(self, name):
+        i = self.param_names.index(name)
+        return float(self.values[i]), float(self.errors[i])
+
+    @property
+    def k(self) -> float:
+        """Stiffness [N/m] (the single k, or the first recording's when k varies)."""
+        return float(self.k_per_recording[0])
+
+    @property
+    def k_err(self) -> float:
+        return float(self.k_per_recording_err[0])
+
+    @property
+    def gamma(self) -> float:
+        return self._get("gamma")[0] if "gamma" in self.param_names else math.nan
+
+    @property
+    def gamma_err(self) -> float:
+        return self._get("gamma")[1] if "gamma" in self.param_names else math.nan
+
+    @property
+    def diffusion(self) -> float:
+        return BOLTZMANN * self.temperature / self.gamma
+
+    @property
+    def diffusion_err(self) -> float:
+        return self.diffusion * self.gamma_err / self.gamma
+
+    @property
+    def tracking_var(self) -> float:
+        return self._get("tracking_var")[0] if "tracking_var" in self.param_names else 0.0
+
+    @property
+    def tracking_var_err(self) -> float:
+        return self._get("tracking_var")[1] if "tracking_var" in self.param_names else 0.0
+
+    @property
+    def correlation(self) -> np.ndarray:
+        s = self.errors
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.covariance / np.outer(s, s)
+
+    # ---- output -----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict in SI units (keys per the public contract)."""
+        many = len(self.k_per_recording) > 1 and not np.allclose(
+            self.k_per_recording, self.k_per_recording[0]
+        )
+        out: dict[str, Any] = {
+            "k": [float(v) for v in self.k_per_recording] if many else self.k,
+            "k_err": [float(v) for v in self.k_per_recording_err] if many else self.k_err,
+            "gamma": self.gamma,
+            "gamma_err": self.gamma_err,
+            "diffusion": self.diffusion,
+            "diffusion_err": self.diffusion_err,
+            "tracking_var": self.tracking_var,
+            "tracking_var_err": self.tracking_var_err,
+            "method": self.method,
+            "model": self.model,
+            "gof": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
+                    for k, v in self.gof.items()},
+            "param_names": list(self.param_names),
+            "values": [float(v) for v in self.values],
+            "covariance": [[float(x) for x in row] for row in self.covariance],
+            "temperature": self.temperature,
+            "n_recordings": self.n_recordings,
+            "n_frames": self.n_frames,
+            "converged": self.converged,
+            "at_bounds": list(self.at_bounds),
+            "notes": list(self.notes),
+            "units": "SI",
+        }
+        if "c" in self.param_names:
+            out["c"], out["c_err"] = self._get("c")
+        return out
+
+    def summary(self) -> str:
+        """A table in lab units."""
+        lines = [f"method: {self.method}   model: {self.model}   "
+                 f"recordings: {self.n_recordings}   frames: {self.n_frames}"]
+        for name, v, e in zip(self.param_names, self.values, self.errors):
+            base = name.split("[")[0]
+            fac, unit = LAB.get(base, (1.0, "SI"))
+            lines.append(f"  {name:<22s} = {v * fac:12.6g} +- {e * fac:10.3g} {unit}")
+        fac, unit = LAB["diffusion"]
+        lines.append(f"  {'D':<22s} = {self.diffusion * fac:12.6g} +- "
+                     f"{self.diffusion_err * fac:10.3g} {unit}")
+        g = self.gof
+        if g:
+            lines.append(f"  goodness of fit: {g.get('test', '')} statistic = "
+                         f"{g.get('statistic', float('nan')):.4g}, dof = {g.get('dof')}, "
+                         f"p = {g.get('p_value', float('nan')):.3g}")
+        for b in self.at_bounds:
+            lines.append(f"  note: {b} is at its lower bound (0)")
+        for n in self.notes:
+            lines.append(f"  note: {n}")
+        return "\n".join(lines)
+
+    def __str__(self) -> str:  # pragma: no cover - convenience
+        return self.summary()
