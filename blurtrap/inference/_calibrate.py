@@ -12,12 +12,12 @@ import numpy as np
 
 from .._config import float64_scope, warn_if_float32
 from ..physics._constants import BOLTZMANN
-from ._fit import chi2_sf, fit_ml
+from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton
 from ._models import TrapModel, get_model
 from ._problems import (
-    ExactArgs,
     SpectralArgs,
     exact_nll,
+    make_exact_args,
     make_layout,
     rec_meta,
     spectral_model_psd,
@@ -38,6 +38,12 @@ def as_recordings(data) -> list:
         data = load(data)
     if hasattr(data, "positions") and hasattr(data, "frame_interval"):
         recs = [data]
+    elif hasattr(data, "shape") and hasattr(data, "dtype"):
+        raise TypeError(
+            f"data is a bare array of shape {tuple(data.shape)}: its frame interval and exposure "
+            "are unknown. Wrap arrays with blurtrap.from_arrays(positions, frame_interval=..., "
+            "exposure=...)."
+        )
     else:
         try:
             recs = list(data)
@@ -115,6 +121,23 @@ def moment_start(rec):
     eps2 = max(eps2, 0.02 * c0)
     k = kt / sigma2
     return k, k * tau, eps2, rho
+
+
+def temporal_information(rec, z_min=5.0):
+    """Whether frames resolve the relaxation: lag-1 autocorrelation significantly > 0
+    (``r1 sqrt(N) > z_min``) and a lag ratio C(2)/C(1) in (0.05, 1).
+    Returns ``(informative, z)``."""
+    y = np.asarray(rec.positions, dtype=float)
+    y = y - y.mean()
+    n = y.size
+    if n < 8:
+        return False, 0.0
+    c0 = float(np.mean(y * y))
+    c1 = float(np.mean(y[1:] * y[:-1]))
+    c2 = float(np.mean(y[2:] * y[:-2]))
+    z = c1 / c0 * math.sqrt(n) if c0 > 0 else 0.0
+    ratio = c2 / c1 if c1 > 0 else 0.0
+    return bool(z > z_min and 0.05 < ratio < 1.0), z
 
 
 def _start_vector(recs, layout, noise):
@@ -271,15 +294,14 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes):
 
 
 def _fit_exact(recs, layout, model, notes):
-    ys = tuple(jnp.asarray(np.asarray(r.positions, dtype=float)) for r in recs)
-    args = ExactArgs(layout=layout, model=model, meta=rec_meta(recs), ys=ys)
+    args = make_exact_args(recs, layout, model)
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     scale = _start_vector(recs, layout, model.noise)
     wout = fit_ml(spectral_nll, scale, sargs)
     if bool(wout.success):
         scale = wout.value
-    out = fit_ml(exact_nll, scale, args)
+    out = fit_ml_fd_newton(exact_nll, scale, args)
     _check_fit(out, layout.names, "likelihood (exact)")
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
@@ -420,25 +442,32 @@ def calibrate(
         return _equipartition(recs, diffusion, pade)
 
     if method == "auto":
-        rhos = [moment_start(r)[3] for r in recs]
-        informative = [rh > 0.05 for rh in rhos]
-        if any(informative):
-            method = "likelihood"
-            notes.append("auto: frames resolve the trap relaxation (lag correlation rho = "
-                         f"{max(rhos):.3g}); using the joint likelihood")
-        elif len({float(r.exposure) for r in recs}) >= 3:
-            method = "variance_vs_exposure"
-            notes.append("auto: dt >> tau (no temporal information); using variance vs "
-                         "exposure")
-        elif len({r.laser_power for r in recs if r.laser_power is not None}) >= 3:
-            method = "variance_vs_power"
-            notes.append("auto: dt >> tau; using variance vs laser power (k = c P)")
+        # The joint likelihood of all frames contains the variance-vs-exposure and
+        # variance-vs-power information too, so it is the most informative choice whenever
+        # the parameters are identifiable at all.
+        info = [temporal_information(r) for r in recs]
+        n_exp = len({float(r.exposure) for r in recs})
+        powers = {float(r.laser_power) for r in recs if r.laser_power is not None}
+        if any(ok for ok, _ in info):
+            best = max(z for _, z in info)
+            notes.append("auto: frames resolve the trap relaxation (lag-1 correlation "
+                         f"{best:.1f} standard errors above 0); joint likelihood")
+        elif n_exp >= 3:
+            notes.append(f"auto: frames are nearly independent (dt >> tau); gamma is "
+                         f"identified by the {n_exp} exposures (variance-vs-exposure "
+                         "information) in the joint likelihood")
+        elif len(powers) >= 3 and all(r.laser_power is not None for r in recs):
+            notes.append("auto: dt >> tau; k = c P across the laser powers (variance-vs-power "
+                         "information) in the joint likelihood")
+            if k is None:
+                k = "linear_power"
         else:
             raise FitError(
                 "these recordings cannot identify gamma: frames are uncorrelated (dt >> tau) "
                 "and there are fewer than 3 exposures or laser powers. Give the diffusion "
                 "coefficient (method='equipartition', diffusion=D) or record an exposure series."
             )
+        method = "likelihood"
 
     if k is None:
         k = "linear_power" if method == "variance_vs_power" else _default_k_mode(recs)

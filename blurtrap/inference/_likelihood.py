@@ -99,7 +99,7 @@ def _whiten(y, c0, c1, rho):
     return eps, v
 
 
-def arma_loglik(y, c0, c1, rho, *, mean: str = "reml"):
+def arma_loglik(y, c0, c1, rho, *, mean: str = "reml", mask=None):
     """Exact Gaussian log-likelihood of frames ``y`` with autocovariance c0, c1 rho^(n-1).
 
     **Arguments:**
@@ -108,23 +108,30 @@ def arma_loglik(y, c0, c1, rho, *, mean: str = "reml"):
     - `c0`, `c1`, `rho`: C(0) [m^2], C(1) [m^2] and the lag ratio rho (0 <= rho < 1).
     - `mean`: ``"zero"`` (y is already centred on the known trap centre), ``"profile"``
       (GLS mean profiled out) or ``"reml"`` (restricted likelihood, the default).
+    - `mask`: optional 0/1 array of shape (N,) that must be a prefix of ones: frames after the
+      prefix are padding. The recursion is causal, so padding at the end does not change the
+      innovations of the real frames; this lets recordings of different lengths share one
+      compiled, vmapped likelihood.
 
     **Returns:** log-likelihood (scalar).
     """
     if mean not in ("zero", "profile", "reml"):
         raise ValueError(f"mean must be 'zero', 'profile' or 'reml'; got mean = {mean!r}")
-    n = y.shape[-1]
+    if mask is None:
+        mask = jnp.ones_like(y)
+    n = jnp.sum(mask)
     if mean == "zero":
         eps, v = _whiten(y, c0, c1, rho)
-        return -0.5 * (n * _LOG2PI + jnp.sum(jnp.log(v)) + jnp.sum(eps * eps / v))
-    both = jnp.stack([y, jnp.ones_like(y)])
+        return -0.5 * (n * _LOG2PI + jnp.sum(mask * jnp.log(v)) + jnp.sum(mask * eps * eps / v))
+    both = jnp.stack([y, mask])
     eps, v = _whiten(both, c0, c1, rho)
     ey, e1 = eps[0], eps[1]
-    s11 = jnp.sum(e1 * e1 / v)
-    s1y = jnp.sum(e1 * ey / v)
-    syy = jnp.sum(ey * ey / v)
+    wv = mask / v
+    s11 = jnp.sum(e1 * e1 * wv)
+    s1y = jnp.sum(e1 * ey * wv)
+    syy = jnp.sum(ey * ey * wv)
     quad = syy - s1y * s1y / s11
-    ll = -0.5 * (n * _LOG2PI + jnp.sum(jnp.log(v)) + quad)
+    ll = -0.5 * (n * _LOG2PI + jnp.sum(mask * jnp.log(v)) + quad)
     if mean == "reml":
         ll = ll - 0.5 * jnp.log(s11) + 0.5 * _LOG2PI
     return ll

@@ -124,20 +124,33 @@ def spectral_nll(p, a: SpectralArgs):
 
 
 class ExactArgs(eqx.Module):
+    """Frames of R recordings zero-padded to a common length (``mask`` marks real frames)."""
+
     layout: Layout
     model: TrapModel
     meta: RecMeta
-    ys: tuple
+    ys: jax.Array  # (R, N_max)
+    mask: jax.Array  # (R, N_max)
     mean: str = eqx.field(static=True, default="reml")
 
 
+def make_exact_args(recordings, layout, model, mean="reml") -> ExactArgs:
+    n_max = max(r.n_frames for r in recordings)
+    ys = np.zeros((len(recordings), n_max))
+    mask = np.zeros((len(recordings), n_max))
+    for i, r in enumerate(recordings):
+        ys[i, : r.n_frames] = np.asarray(r.positions, dtype=float)
+        mask[i, : r.n_frames] = 1.0
+    return ExactArgs(layout=layout, model=model, meta=rec_meta(recordings),
+                     ys=jnp.asarray(ys), mask=jnp.asarray(mask), mean=mean)
+
+
 def exact_nll(p, a: ExactArgs):
-    """Exact (REML) negative log-likelihood summed over recordings."""
+    """Exact (REML) negative log-likelihood summed over recordings (one vmapped graph)."""
     k_rec, gamma, eps2 = a.layout.unpack(p)
-    total = 0.0
-    for i, y in enumerate(a.ys):  # over recordings (few), never over frames
-        c0, c1, rho = a.model.moments(
-            k_rec[i], gamma, eps2, a.meta.dt[i], a.meta.w[i], a.meta.temp[i]
-        )
-        total = total - arma_loglik(y, c0, c1, rho, mean=a.mean)
-    return total
+    c0, c1, rho = a.model.moments(k_rec, gamma, eps2, a.meta.dt, a.meta.w, a.meta.temp)
+
+    def one(y, m, c0_, c1_, rho_):
+        return arma_loglik(y, c0_, c1_, rho_, mean=a.mean, mask=m)
+
+    return -jnp.sum(jax.vmap(one)(a.ys, a.mask, c0, c1, rho))

@@ -80,11 +80,11 @@ def _residuals(x, a_scale):
 
 
 @eqx.filter_jit
-def _lsq(a: VarianceArgs, scale):
+def _lsq(a: VarianceArgs, scale, x0):
     sol = optx.least_squares(
         _residuals,
         optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
-        jnp.zeros_like(scale),
+        x0,
         args=(a, scale),
         max_steps=500,
         throw=False,
@@ -104,11 +104,17 @@ def _lsq(a: VarianceArgs, scale):
 
 
 def fit_variances(args: VarianceArgs, scale, n_iter: int = 3):
-    """Iteratively reweighted least squares: weights = model SE at the current estimate."""
+    """Iteratively reweighted least squares: weights = model SE at the current estimate.
+
+    The parametrisation ``p = scale * exp(x)`` keeps the start values as fixed scales (so the
+    conditioning test does not depend on how close eps^2 came to 0); each pass warm-starts.
+    """
     p = scale
+    x = jnp.zeros_like(scale)
     for _ in range(n_iter):
         args = eqx.tree_at(lambda a: a.se, args, _predicted_se(p, args))
-        p, cov, chi2, ok, pd = _lsq(args, p)
+        p, cov, chi2, ok, pd = _lsq(args, scale, x)
+        x = jnp.log(p / scale)
     return p, cov, chi2, ok, pd
 
 

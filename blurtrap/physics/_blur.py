@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._checks import as_float, check_nonnegative, check_positive, is_concrete
+from ._checks import check_nonnegative, check_positive, is_concrete
 from ._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 # Below this alpha the closed form loses digits to cancellation; the Taylor series
