@@ -43,6 +43,7 @@ from .inference import (
     FitError as FitError,
     TrapModel as TrapModel,
     calibrate as calibrate,
+    calibrate_batch as calibrate_batch,
 )
 from .simulate import (
     ExponentialProfile as ExponentialProfile,

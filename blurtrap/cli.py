@@ -1,37 +1,313 @@
-"""The ``blurtrap`` command line (skeleton; subcommands land with their capabilities)."""
+"""The ``blurtrap`` command line: calibrate optical traps from blurred, sampled recordings.
+
+Lab units on the command line and in the output (nm, pN/nm, pN s/um, ms, Hz, um^2/s, mW);
+SI inside. Errors are one line ``blurtrap <command>: error: ...`` with a non-zero exit code
+(``--debug`` shows the traceback).
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
+
+_METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
+            "equipartition")
+_MODELS = ("standard", "blur", "naive", "naive_aliased")
+_K_MODES = ("shared", "per_recording", "per_power", "linear_power")
+
+# name: (factor from SI, lab unit); the lab table printed by `calibrate`
+_LAB = {
+    "k": (1e3, "pN/nm"),
+    "c": (1e3, "pN/nm/W"),
+    "gamma": (1e6, "pN s/um"),
+    "tracking_var": (1e18, "nm^2"),
+    "diffusion": (1e12, "um^2/s"),
+    "tau": (1e3, "ms"),
+    "corner_frequency": (1.0, "Hz"),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``blurtrap <cmd>: error: ...``, exit 2)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+class CliError(Exception):
+    """A user error with a message that needs no traceback."""
+
+
+def _add_debug(p):
+    p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                   help="show full tracebacks on error")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="blurtrap", description=__doc__)
+    p = _Parser(prog="blurtrap", description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--debug", action="store_true", help="show full tracebacks on error")
-    sub = p.add_subparsers(dest="command", required=True)
-    d = sub.add_parser("demo", help="simulate the paper's experiment and calibrate it every way")
-    d.add_argument("--out", default="blurtrap-demo", help="output folder (default ./blurtrap-demo)")
-    d.add_argument("--json", action="store_true", help="print one JSON object")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    d = sub.add_parser(
+        "demo", help="simulate the paper's experiment and calibrate it every way",
+        description="Simulate Wong & Halvorsen (2006): a 3.063 um bead at 4 laser powers "
+        "filmed with a series of exposures by a ~1500 fps camera with 2 nm tracking error; "
+        "calibrate it every way (naive equipartition, variance vs exposure and vs power, "
+        "blocked PSD with naive / naive-aliased / blur-corrected models, exact likelihood, "
+        "posterior when available); print k and gamma against the truth; write PNG figures "
+        "and report.md.")
+    d.add_argument("--out", default="blurtrap-demo", metavar="DIR",
+                   help="output folder for report.md, results.json and figures "
+                   "(default ./blurtrap-demo)")
+    d.add_argument("--json", action="store_true",
+                   help="print one JSON object (no progress lines)")
+    d.add_argument("--quick", action="store_true",
+                   help="small sizes, no exact likelihood or posterior (a fast check)")
+    d.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    _add_debug(d)
+
+    s = sub.add_parser(
+        "simulate", help="simulate recordings and write a manifest + CSV files",
+        description="Simulate blurred, sampled bead positions (exact frame sampler) for every "
+        "combination of --k and --exposure-ms and write DIR/manifest.json with one CSV per "
+        "recording (positions in nm).")
+    s.add_argument("--k", type=float, nargs="+", required=True, metavar="PN_PER_NM",
+                   help="trap stiffness(es) [pN/nm]")
+    g = s.add_mutually_exclusive_group(required=True)
+    g.add_argument("--gamma", type=float, metavar="PN_S_PER_UM",
+                   help="friction coefficient [pN s/um]")
+    g.add_argument("--radius", type=float, metavar="UM",
+                   help="bead radius [um]; gamma = 6 pi eta r")
+    s.add_argument("--viscosity", type=float, default=0.00095, metavar="PA_S",
+                   help="viscosity for --radius [Pa s] (default 0.00095, water at 295 K)")
+    s.add_argument("--exposure-ms", type=float, nargs="+", required=True, metavar="MS",
+                   help="exposure time(s) W [ms], each <= 1000/fps")
+    s.add_argument("--fps", type=float, default=1500.0, help="frame rate [Hz] (default 1500)")
+    s.add_argument("--frames", type=int, default=32768, help="frames per recording "
+                   "(default 32768)")
+    s.add_argument("--tracking-nm", type=float, default=0.0, metavar="NM",
+                   help="tracking-error standard deviation [nm] (default 0)")
+    s.add_argument("--temperature", type=float, default=295.0, metavar="K",
+                   help="temperature [K] (default 295)")
+    s.add_argument("--power-mw", type=float, nargs="+", metavar="MW",
+                   help="laser power [mW] for each --k (stored in the manifest)")
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_debug(s)
+
+    c = sub.add_parser(
+        "calibrate", help="calibrate k, gamma, D, eps^2 from a manifest (or NPZ/CSV)",
+        description="Calibrate the recordings named by MANIFEST and print k, gamma, D and "
+        "eps^2 with standard errors in lab units (or --json: the result in SI units).")
+    c.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
+    c.add_argument("--method", choices=_METHODS, default="auto",
+                   help="estimator (default auto: the most informative the data allow)")
+    c.add_argument("--model", choices=_MODELS, default="standard",
+                   help="trap model (default standard: blur + aliasing + tracking noise)")
+    c.add_argument("--k-mode", choices=_K_MODES, default=None,
+                   help="how k is shared across recordings (default: per power when powers "
+                   "differ, k = cP for variance_vs_power)")
+    c.add_argument("--likelihood", choices=("auto", "exact", "whittle"), default="auto",
+                   help="likelihood for --method likelihood (default auto)")
+    c.add_argument("--n-blocks", type=int, default=None,
+                   help="blocks for --method psd (default 128, >= 64 frames each)")
+    c.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("FMIN", "FMAX"),
+                   help="frequency range fitted by the spectral methods [Hz]")
+    c.add_argument("--diffusion", type=float, default=None, metavar="UM2_PER_S",
+                   help="known D [um^2/s] for blur-corrected --method equipartition")
+    c.add_argument("--json", action="store_true",
+                   help="print the result as one JSON object (SI units, to_dict())")
+    _add_debug(c)
     return p
 
 
+# ------------------------------------------------------------------------------------------
+# simulate
+# ------------------------------------------------------------------------------------------
+def _simulate(args) -> int:
+    import numpy as np
+
+    from .data import Recording, RecordingSet, save_manifest
+
+    if args.frames < 16:
+        raise CliError(f"--frames must be >= 16; got {args.frames}")
+    if args.fps <= 0:
+        raise CliError(f"--fps must be > 0 Hz; got {args.fps:g}")
+    ks = [k * 1e-3 for k in args.k]
+    if any(not (k > 0) for k in ks):
+        raise CliError(f"--k must be > 0 pN/nm; got {args.k}")
+    if args.gamma is not None:
+        gamma = args.gamma * 1e-6
+        if not gamma > 0:
+            raise CliError(f"--gamma must be > 0 pN s/um; got {args.gamma:g}")
+    else:
+        if not args.radius > 0:
+            raise CliError(f"--radius must be > 0 um; got {args.radius:g}")
+        gamma = 6 * math.pi * args.viscosity * args.radius * 1e-6
+    dt = 1.0 / args.fps
+    ws = [w * 1e-3 for w in args.exposure_ms]
+    for w in ws:
+        if not (0 < w <= dt * (1 + 1e-3)):
+            raise CliError(
+                f"--exposure-ms {w * 1e3:g} must be > 0 and <= the frame interval "
+                f"1000/fps = {dt * 1e3:.6g} ms")
+    w_arr = np.minimum(np.asarray(ws), dt)
+    powers = None
+    if args.power_mw is not None:
+        if len(args.power_mw) != len(ks):
+            raise CliError(f"--power-mw needs one value per --k ({len(ks)}); "
+                           f"got {len(args.power_mw)}")
+        powers = [p * 1e-3 for p in args.power_mw]
+    import jax
+
+    from .simulate import simulate
+
+    # an independent random stream per recording
+    keys = jax.random.split(jax.random.key(args.seed), len(ks) * len(w_arr))
+    keys = keys.reshape(len(ks), len(w_arr))
+    x = simulate(np.asarray(ks)[:, None], gamma, w_arr[None, :], dt, args.frames,
+                 key=keys, temperature=args.temperature,
+                 method="exact_frames", tracking_std=args.tracking_nm * 1e-9)
+    x = np.asarray(x, dtype=float)
+    recs = []
+    for i, k in enumerate(ks):
+        for j, w in enumerate(w_arr):
+            recs.append(Recording(
+                x[i, j, 0], frame_interval=dt, exposure=float(w), temperature=args.temperature,
+                laser_power=None if powers is None else powers[i],
+                name=f"k{k * 1e3:.4g}pN_per_nm_W{w * 1e3:.4g}ms",
+                metadata={"simulated": True, "k_true_N_per_m": k, "gamma_true_N_s_per_m": gamma,
+                          "tracking_std_m": args.tracking_nm * 1e-9, "seed": args.seed},
+            ))
+    from pathlib import Path
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = save_manifest(RecordingSet(recs), out / "manifest.json", "nm")
+    if args.json:
+        print(json.dumps({"manifest": str(written[0]), "files": [str(p) for p in written[1:]],
+                          "n_recordings": len(recs), "n_frames": args.frames,
+                          "gamma_pN_s_per_um": gamma * 1e6,
+                          "k_pN_per_nm": list(args.k), "exposure_ms": list(args.exposure_ms),
+                          "frame_interval_ms": dt * 1e3}))
+    else:
+        print(f"wrote {len(recs)} recording(s) x {args.frames} frames "
+              f"(gamma = {gamma * 1e6:.4g} pN s/um, dt = {dt * 1e3:.4g} ms) to {written[0]}")
+    return 0
+
+
+# ------------------------------------------------------------------------------------------
+# calibrate
+# ------------------------------------------------------------------------------------------
+def format_result(result) -> str:
+    """A readable lab-unit table of a ``CalibrationResult``."""
+    from .physics import BOLTZMANN
+
+    rows = []
+    for name, v, e in zip(result.param_names, result.values, result.errors):
+        base = name.split("[")[0]
+        fac, unit = _LAB.get(base, (1.0, "SI"))
+        rows.append((name, v * fac, e * fac, unit))
+    g = result.gamma
+    if math.isfinite(g):
+        fac, unit = _LAB["diffusion"]
+        rows.append(("D = kT/gamma", result.diffusion * fac, result.diffusion_err * fac, unit))
+        k = result.k
+        if "c" not in result.param_names:
+            tau = g / k
+            rows.append(("tau = gamma/k" + (" (first)" if len(set(map(float,
+                          result.k_per_recording))) > 1 else ""), tau * 1e3, math.nan, "ms"))
+            rows.append(("f_c = k/(2 pi gamma)", k / (2 * math.pi * g), math.nan, "Hz"))
+    if "tracking_var" in result.param_names:
+        tv = max(result.tracking_var, 0.0)
+        rows.append(("eps (tracking rms)", math.sqrt(tv) * 1e9, math.nan, "nm"))
+    if "c" in result.param_names or len(result.k_per_recording) > 1:
+        ks = result.k_per_recording
+        es = result.k_per_recording_err
+        if "c" in result.param_names or len(set(map(float, ks))) > 1:
+            for i, (kk, ee) in enumerate(zip(ks, es)):
+                rows.append((f"k (recording {i})", kk * 1e3, ee * 1e3, "pN/nm"))
+    w = max(len(r[0]) for r in rows)
+    lines = [f"method: {result.method}   model: {result.model}   recordings: "
+             f"{result.n_recordings}   frames: {result.n_frames}   T = "
+             f"{result.temperature:g} K (kT = {BOLTZMANN * result.temperature * 1e21:.4g} pN nm)"]
+    lines.append(f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  unit")
+    for name, v, e, unit in rows:
+        err = f"{e:10.3g}" if math.isfinite(e) else " " * 10
+        lines.append(f"  {name.ljust(w)}  {v:12.6g}  {err}  {unit}")
+    gof = result.gof
+    if gof:
+        lines.append(f"  goodness of fit: {gof.get('test', '')}: statistic = "
+                     f"{gof.get('statistic', math.nan):.4g}, dof = {gof.get('dof')}, "
+                     f"p = {gof.get('p_value', math.nan):.3g}")
+    for b in result.at_bounds:
+        lines.append(f"  note: {b} is at its lower bound (0)")
+    for n in result.notes:
+        lines.append(f"  note: {n}")
+    return "\n".join(lines)
+
+
+def _calibrate(args) -> int:
+    from pathlib import Path
+
+    from .inference import calibrate
+
+    path = Path(args.manifest)
+    if not path.exists():
+        raise CliError(f"{path}: no such file")
+    kw = dict(method=args.method, model=args.model, likelihood=args.likelihood)
+    if args.k_mode is not None:
+        kw["k"] = args.k_mode
+    if args.n_blocks is not None:
+        kw["n_blocks"] = args.n_blocks
+    if args.f_range is not None:
+        kw["f_range"] = tuple(args.f_range)
+    if args.diffusion is not None:
+        if args.method != "equipartition":
+            raise CliError("--diffusion applies to --method equipartition only")
+        kw["diffusion"] = args.diffusion * 1e-12
+    result = calibrate(str(path), **kw)
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(format_result(result))
+    return 0
+
+
+# ------------------------------------------------------------------------------------------
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error (2), already printed
+        return int(exc.code) if isinstance(exc.code, int) else 1
     from . import enable_x64
 
     enable_x64()
+    debug = getattr(args, "debug", False)
     try:
         if args.command == "demo":
             from ._demo import run_demo
 
             return run_demo(args)
+        if args.command == "simulate":
+            return _simulate(args)
+        if args.command == "calibrate":
+            return _calibrate(args)
+        raise CliError(f"unknown command {args.command!r}")  # pragma: no cover
+    except KeyboardInterrupt:  # pragma: no cover
+        print(f"blurtrap {args.command}: interrupted", file=sys.stderr)
+        return 130
     except Exception as exc:  # one clear line, not a traceback
-        if args.debug:
+        if debug:
             raise
-        print(f"blurtrap {args.command}: error: {exc}", file=sys.stderr)
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        print(f"blurtrap {args.command}: error: {msg}", file=sys.stderr)
         return 1
-    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,3 +15,4 @@ from ._variance import (
     empirical_variance_se as empirical_variance_se,
     highpass_variance_curve as highpass_variance_curve,
 )
+from ._batch import BatchCalibration as BatchCalibration, calibrate_batch as calibrate_batch

@@ -1,1 +1,45 @@
-"""blurtrap.plotting"""
+"""blurtrap.plotting: matplotlib figures of recordings and calibrations (lab units).
+
+Imported only on request (``import blurtrap.plotting``); ``import blurtrap`` never imports
+matplotlib. Every function returns a ``matplotlib.figure.Figure`` built without pyplot
+(Jupyter displays it; save with ``fig.savefig(path)``), takes SI inputs (recordings,
+``CalibrationResult`` objects, arrays) and labels its axes in lab units. Plots compute no
+fits: fit with :func:`blurtrap.calibrate` and pass the results in.
+
+The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
+:func:`fig1b_histogram`, :func:`fig3_fractional_variance`, :func:`fig4_stiffness_vs_power`,
+:func:`fig5_highpass`, :func:`fig6_psd`, :func:`fig7_deviation`. Beyond it: :func:`corner`,
+:func:`residuals_before_after`, :func:`naive_error_map`, :func:`diagnose_ranking`.
+"""
+
+from ._common import LAB_UNITS as LAB_UNITS
+from ._extra import (
+    corner as corner,
+    diagnose_ranking as diagnose_ranking,
+    naive_error_map as naive_error_map,
+    residuals_before_after as residuals_before_after,
+)
+from ._paper import (
+    fig1a_universal_curve as fig1a_universal_curve,
+    fig1b_histogram as fig1b_histogram,
+    fig3_fractional_variance as fig3_fractional_variance,
+    fig4_stiffness_vs_power as fig4_stiffness_vs_power,
+    fig5_highpass as fig5_highpass,
+    fig6_psd as fig6_psd,
+    fig7_deviation as fig7_deviation,
+)
+
+__all__ = [
+    "LAB_UNITS",
+    "corner",
+    "diagnose_ranking",
+    "fig1a_universal_curve",
+    "fig1b_histogram",
+    "fig3_fractional_variance",
+    "fig4_stiffness_vs_power",
+    "fig5_highpass",
+    "fig6_psd",
+    "fig7_deviation",
+    "naive_error_map",
+    "residuals_before_after",
+]

@@ -191,3 +191,24 @@ def test_no_recompilation_for_new_data_of_same_shape(monkeypatch, camera_set):
     bt.calibrate(recs[1])
     bt.calibrate(recs[2])
     assert calls["n"] == n_first
+
+
+def test_calibrate_batch_equals_individual_fits(camera_set):
+    x = np.stack([r.positions for r in camera_set[:4]])
+    b = bt.calibrate_batch(x, frame_interval=DT, exposure=DT)
+    assert b.success.all() and len(b) == 4
+    for i in (0, 3):
+        one = bt.calibrate(camera_set[i])
+        assert abs(b.k[i] / one.k - 1) < 1e-7 and abs(b.gamma[i] / one.gamma - 1) < 1e-7
+        assert abs(b.k_err[i] / one.k_err - 1) < 1e-5
+
+
+def test_calibrate_batch_rejects_bad_input():
+    with pytest.raises(ValueError, match=r"positions must have shape \(batch, frames\)"):
+        bt.calibrate_batch(np.zeros(100), frame_interval=DT, exposure=DT)
+    y = np.ones((2, 100))
+    y[1, 7] = np.nan
+    with pytest.raises(ValueError, match="first at row 1, frame 7"):
+        bt.calibrate_batch(y, frame_interval=DT, exposure=DT)
+    with pytest.raises(ValueError, match="exposure = 0.002 s"):
+        bt.calibrate_batch(np.ones((2, 100)), frame_interval=DT, exposure=2e-3)

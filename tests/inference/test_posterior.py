@@ -319,4 +319,4 @@ def test_interval_coverage():
     for q in (0.68, 0.95):
         se = math.sqrt(q * (1 - q) / n)
         for name, h in hits[q].items():
-            assert abs(h / n - q) < 4 * se, (q, name, h)
+            assert abs(h / n - q) < 4 * se, (q, name, h, hits)

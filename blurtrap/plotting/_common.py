@@ -1,0 +1,190 @@
+"""Shared helpers for the figures: lab units, parameter extraction, model spectra.
+
+Plots are drawn in lab units (nm, pN/nm, pN s/um, ms, Hz, um^2/s, mW) and always say so in
+their axis labels; everything passed in is SI (as everywhere in the Python API).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
+
+# name -> (factor from SI, lab unit, pretty label); `c` is k per laser power
+LAB_UNITS = {
+    "k": (1e3, "pN/nm", "k"),
+    "c": (1e3, "pN/nm/W", "c = k/P"),
+    "gamma": (1e6, "pN s/um", "gamma"),
+    "diffusion": (1e12, "um^2/s", "D"),
+    "tracking_var": (1e18, "nm^2", "eps^2"),
+    "tau": (1e3, "ms", "tau"),
+    "corner_frequency": (1.0, "Hz", "f_c"),
+    "exposure": (1e3, "ms", "W"),
+    "frame_interval": (1e3, "ms", "dt"),
+    "position": (1e9, "nm", "x"),
+    "laser_power": (1e3, "mW", "P"),
+}
+
+NM = 1e9
+NM2 = 1e18
+MS = 1e3
+
+
+def lab(name: str):
+    """(factor, unit, label) of a parameter name such as ``k``, ``k[P=100 mW]`` or ``gamma``."""
+    base = name.split("[")[0]
+    if base in LAB_UNITS:
+        fac, unit, label = LAB_UNITS[base]
+        return fac, unit, label + name[len(base):]
+    return 1.0, "SI", name
+
+
+def new_figure(nrows=1, ncols=1, *, figsize=None, ax=None, **kw):
+    """A matplotlib Figure (no pyplot state: safe in scripts, notebooks and threads), or the
+    figure of a given `ax` when the caller draws into an existing axes."""
+    if ax is not None:
+        return ax.figure, ax
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=True, **kw)
+    return fig, axes
+
+
+def is_result(obj) -> bool:
+    return hasattr(obj, "param_names") and hasattr(obj, "k_per_recording")
+
+
+def trap_params(params, index: int = 0):
+    """``(k [N/m], gamma [N s/m], tracking_var [m^2], temperature [K])`` from a
+    ``CalibrationResult`` (``index`` picks the recording when k varies), a mapping with keys
+    ``k``, ``gamma`` (optional ``tracking_var``, ``temperature``) or a tuple
+    ``(k, gamma[, tracking_var])``."""
+    if is_result(params):
+        k = float(np.asarray(params.k_per_recording)[index])
+        g = float(params.gamma)
+        e2 = float(params.tracking_var)
+        t = float(params.temperature)
+    elif isinstance(params, Mapping):
+        k = float(params["k"])
+        g = float(params.get("gamma", math.nan))
+        e2 = float(params.get("tracking_var", 0.0))
+        t = float(params.get("temperature", DEFAULT_TEMPERATURE))
+    else:
+        seq = tuple(params)
+        if len(seq) < 2:
+            raise ValueError(
+                "params must be a CalibrationResult, a mapping with 'k' [N/m] and 'gamma' "
+                f"[N s/m], or a tuple (k, gamma[, tracking_var]); got {params!r}"
+            )
+        k, g = float(seq[0]), float(seq[1])
+        e2 = float(seq[2]) if len(seq) > 2 else 0.0
+        t = DEFAULT_TEMPERATURE
+    if not (k > 0):
+        raise ValueError(f"k must be > 0 [N/m]; got k = {k!r}")
+    return k, g, e2, t
+
+
+def model_name(params) -> str:
+    if is_result(params):
+        return str(params.model)
+    if isinstance(params, Mapping):
+        return str(params.get("model", "standard"))
+    return "standard"
+
+
+def blur_factor_np(alpha):
+    """S(alpha) in numpy (series below 1e-3, expm1 above)."""
+    a = np.asarray(alpha, dtype=float)
+    small = a < 1e-3
+    safe = np.where(small, 1.0, a)
+    big = 2.0 / safe * (1.0 + np.expm1(-safe) / safe)
+    ser = 1.0 - a / 3.0 + a * a / 12.0 - a**3 / 60.0
+    return np.where(small, ser, big)
+
+
+def sample_variance_se_np(n, k, gamma, exposure, frame_interval, temperature, tracking_var=0.0):
+    """Standard error of the sample variance of n correlated frames, long-record form
+    ``sqrt((2/n) (C(0)^2 + 2 sum_{m>=1} C(m)^2))`` with ``C(m) = sigma2 B rho^m`` (DESIGN
+    items 5 and 10), in numpy (broadcasts over `exposure`)."""
+    sigma2 = kT(temperature) / k
+    tau = gamma / k
+    a = np.asarray(exposure, dtype=float) / tau
+    half = np.maximum(a / 2, 1e-300)
+    b = np.where(a < 1e-6, 1.0 + a * a / 12.0, (np.sinh(half) / half) ** 2)
+    rho = math.exp(-frame_interval / tau)
+    c0 = sigma2 * blur_factor_np(a) + tracking_var
+    c1 = sigma2 * b * rho
+    return np.sqrt(2.0 / n * (c0**2 + 2.0 * c1**2 / (1.0 - rho**2)))
+
+
+def model_psd(params, recording, f, model=None, index: int = 0):
+    """Two-sided model PSD [m^2/Hz] of a fitted model for ``recording`` at ``f`` [Hz].
+
+    ``model`` defaults to the model of a ``CalibrationResult`` (``naive``, ``naive_aliased``,
+    ``blur``, ``standard``), else ``standard``."""
+    import jax
+    import jax.numpy as jnp
+
+    from ..inference import get_model
+
+    k, g, e2, t = trap_params(params, index)
+    mdl = get_model(model or model_name(params))
+    with jax.enable_x64(True):
+        f2 = jnp.asarray(np.asarray(f, dtype=float)[None, :])
+        one = lambda v: jnp.asarray([float(v)])  # noqa: E731
+        p = mdl.psd(f2, one(k), one(g), jnp.asarray(e2), one(recording.frame_interval),
+                    one(recording.exposure), one(t))
+        return np.asarray(p, dtype=float)[0]
+
+
+def blocked_psd(recording, n_blocks=None):
+    """Blocked periodogram exactly as ``calibrate(method="psd")`` computes it.
+
+    Returns ``(f [Hz], two-sided P [m^2/Hz], n_blocks)``."""
+    from ..inference._calibrate import _np_periodogram
+
+    n = recording.n_frames
+    nb = n_blocks if n_blocks is not None else max(1, min(128, n // 64))
+    f, p, _ = _np_periodogram(recording.positions, float(recording.frame_interval), int(nb))
+    return f, p, int(nb)
+
+
+def fit_n_blocks(fit, recording, n_blocks):
+    if n_blocks is not None:
+        return int(n_blocks)
+    extras = getattr(fit, "extras", None) or {}
+    if "n_blocks" in extras:
+        return int(extras["n_blocks"])
+    return max(1, min(128, recording.n_frames // 64))
+
+
+def gamma_pdf(x, shape: float):
+    """Density of Gamma(shape, scale 1/shape) (mean 1), numpy only."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros_like(x)
+    pos = x > 0
+    xs = x[pos]
+    logp = shape * math.log(shape) - math.lgamma(shape) + (shape - 1) * np.log(xs) - shape * xs
+    out[pos] = np.exp(logp)
+    return out
+
+
+def normal_pdf(x, mean, std):
+    x = np.asarray(x, dtype=float)
+    return np.exp(-0.5 * ((x - mean) / std) ** 2) / (std * math.sqrt(2 * math.pi))
+
+
+def kT(temperature=DEFAULT_TEMPERATURE):
+    return BOLTZMANN * float(temperature)
+
+
+FIT_STYLE = {
+    "standard": dict(color="C3", ls="-", lw=1.8, label="blur-corrected, aliased + noise (standard)"),
+    "blur": dict(color="C3", ls="-", lw=1.8, label="blur-corrected, aliased (blur)"),
+    "naive": dict(color="C0", ls="--", lw=1.5, label="naive Lorentzian (naive)"),
+    "naive_aliased": dict(color="C2", ls=":", lw=1.8, label="naive aliased (naive_aliased)"),
+}

@@ -1,0 +1,226 @@
+"""Figures beyond the paper: posterior corner plot, residuals before/after adding an effect,
+naive-calibration error maps and the ranking of missing effects."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ._common import (
+    MS,
+    blocked_psd,
+    fit_n_blocks,
+    lab,
+    model_name,
+    model_psd,
+    new_figure,
+)
+
+
+def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 0.84)):
+    r"""Corner plot of posterior samples, in lab units.
+
+    - `samples`: mapping ``name -> 1-D array`` of samples in SI units (names such as ``k``,
+      ``gamma``, ``tracking_var``, ``c``, ``diffusion`` are converted to pN/nm, pN s/um,
+      nm^2, pN/nm/W, um^2/s; other names are plotted as given).
+    - `truths`: optional mapping ``name -> value`` [SI] drawn as lines.
+    - `labels`: optional mapping ``name -> axis label`` (overrides the default
+      ``"name [unit]"``).
+    - `quantiles`: drawn as dashed lines on the marginal histograms.
+
+    **Returns:** Figure with an ``n x n`` grid of axes (upper triangle hidden).
+    """
+    if not isinstance(samples, Mapping) or not samples:
+        raise ValueError("samples must be a non-empty mapping name -> 1-D array of samples")
+    names = list(samples)
+    data = []
+    for nme in names:
+        arr = np.asarray(samples[nme], dtype=float).ravel()
+        if arr.size < 2:
+            raise ValueError(f"samples[{nme!r}] needs at least 2 samples; got {arr.size}")
+        fac, _, _ = lab(nme)
+        data.append(arr * fac)
+    n = len(names)
+    fig, axes = new_figure(n, n, figsize=(2.3 * n + 0.6, 2.3 * n + 0.4))
+    axes = np.asarray(axes).reshape(n, n)
+
+    def axis_label(nme):
+        if labels and nme in labels:
+            return labels[nme]
+        fac, unit, pretty = lab(nme)
+        return f"{pretty} [{unit}]" if unit != "SI" else f"{nme} (SI)"
+
+    for i in range(n):
+        for j in range(n):
+            ax = axes[i, j]
+            if j > i:
+                ax.set_axis_off()
+                continue
+            if i == j:
+                ax.hist(data[i], bins=bins, color="0.6", histtype="stepfilled", density=True)
+                for q in np.quantile(data[i], quantiles):
+                    ax.axvline(q, color="k", ls="--", lw=0.8)
+                lo, mid, hi = np.quantile(data[i], (0.16, 0.5, 0.84))
+                ax.set_title(f"{lab(names[i])[2]} = {mid:.4g} (+{hi - mid:.2g}/-{mid - lo:.2g})",
+                             fontsize=8)
+                ax.set_yticks([])
+                if truths and names[i] in truths:
+                    ax.axvline(float(truths[names[i]]) * lab(names[i])[0], color="C3", lw=1.2)
+            else:
+                ax.hist2d(data[j], data[i], bins=bins, cmap="Greys")
+                if truths and names[j] in truths and names[i] in truths:
+                    tx = float(truths[names[j]]) * lab(names[j])[0]
+                    ty = float(truths[names[i]]) * lab(names[i])[0]
+                    ax.axvline(tx, color="C3", lw=1.0)
+                    ax.axhline(ty, color="C3", lw=1.0)
+                    ax.plot([tx], [ty], "s", color="C3", ms=4)
+            if i == n - 1:
+                ax.set_xlabel(axis_label(names[j]))
+            else:
+                ax.tick_params(labelbottom=False)
+            if j == 0 and i > 0:
+                ax.set_ylabel(axis_label(names[i]))
+            elif i != j:
+                ax.tick_params(labelleft=False)
+    if n == 1:
+        axes[0, 0].set_xlabel(axis_label(names[0]))
+    return fig
+
+
+def _binned(f, ratio, n_bins=20):
+    edges = np.unique(np.geomspace(f.min(), f.max() * (1 + 1e-12), n_bins + 1))
+    idx = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, len(edges) - 2)
+    fc, rm, cnt = [], [], []
+    for b in range(len(edges) - 1):
+        sel = idx == b
+        if sel.any():
+            fc.append(float(np.exp(np.mean(np.log(f[sel])))))
+            rm.append(float(np.mean(ratio[sel])))
+            cnt.append(int(sel.sum()))
+    return np.asarray(fc), np.asarray(rm), np.asarray(cnt)
+
+
+def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("before", "after")):
+    r"""Blocked-PSD residuals (data/model) of two fits of the same recording, one panel each:
+    e.g. the ``naive`` model before and the ``standard`` model after adding motion blur,
+    aliasing and tracking noise. Dots: each frequency; line: log-binned mean with its
+    expected ``+- 1/sqrt(n_b n_bin)`` band; the title gives the goodness of fit.
+
+    - `fit_a`, `fit_b`: ``CalibrationResult`` objects (or mappings with ``k``, ``gamma``,
+      ``tracking_var``, ``model``) for `recording`.
+    - `n_blocks`: blocks of the periodogram (default: what `fit_b` used).
+
+    **Returns:** Figure with two axes sharing the frequency axis.
+    """
+    nb = fit_n_blocks(fit_b, recording, n_blocks)
+    f, p, nb = blocked_psd(recording, nb)
+    fig, axes = new_figure(2, 1, figsize=(6.4, 5.6), sharex=True)
+    for ax, fit, tag in zip(axes, (fit_a, fit_b), labels):
+        ratio = p / model_psd(fit, recording, f)
+        fb, rb, cnt = _binned(f, ratio)
+        band = 1.0 / np.sqrt(nb * cnt)
+        ax.semilogx(f, ratio, ".", color="0.6", ms=2.5, label="data / model")
+        ax.fill_between(fb, 1 - 2 * band, 1 + 2 * band, color="C0", alpha=0.2,
+                        label="expected +-2 sd of bin mean")
+        ax.semilogx(fb, rb, "-", color="C3", lw=1.6, label="log-binned mean")
+        ax.axhline(1.0, color="k", lw=0.8)
+        gof = getattr(fit, "gof", None) or {}
+        extra = ""
+        if "statistic" in gof:
+            extra = (f"; {gof.get('test', 'gof')}: {gof['statistic']:.4g}/{gof.get('dof')} "
+                     f"(p = {gof.get('p_value', math.nan):.2g})")
+        ax.set_title(f"{tag}: model {model_name(fit)}{extra}", fontsize=9)
+        ax.set_ylabel("P_data / P_model (dimensionless)")
+        ax.legend(fontsize=7, loc="upper left")
+    axes[-1].set_xlabel("frequency f [Hz]")
+    return fig
+
+
+def naive_error_map(k_grid, w_grid, error, *, ax=None,
+                    contours=(-50, -20, -10, -5, 5, 10, 20, 50, 100, 200),
+                    title=None):
+    r"""Heatmap of the relative error of naive equipartition ``kT/var(X_m)`` over a grid of
+    true stiffness k and exposure W.
+
+    - `k_grid` [N/m] (rows), `w_grid` [s] (columns).
+    - `error`: array of shape ``(len(k_grid), len(w_grid))``: relative error
+      ``(k_naive - k)/k`` (a fraction; shown in %).
+    - `contours`: error levels [%] drawn as labelled contour lines.
+    - `ax`: draw into an existing axes (e.g. one panel per bead size).
+
+    **Returns:** the Figure (of `ax` if given).
+    """
+    k = np.asarray(k_grid, dtype=float).ravel()
+    w = np.asarray(w_grid, dtype=float).ravel()
+    e = np.asarray(error, dtype=float)
+    if e.shape != (k.size, w.size):
+        raise ValueError(
+            f"error must have shape (len(k_grid), len(w_grid)) = ({k.size}, {w.size}); "
+            f"got {e.shape}"
+        )
+    from matplotlib.colors import TwoSlopeNorm
+
+    fig, ax = new_figure(figsize=(6.0, 4.6), ax=ax)
+    pct = 100.0 * e
+    vmin = min(float(np.nanmin(pct)), -1e-6)
+    vmax = max(float(np.nanmax(pct)), 1e-6)
+    norm = TwoSlopeNorm(vmin=vmin, vcenter=0.0, vmax=vmax)
+    mesh = ax.pcolormesh(w * MS, k * 1e3, pct, cmap="RdBu_r", norm=norm, shading="nearest")
+    cb = fig.colorbar(mesh, ax=ax)
+    cb.set_label("naive k error (k_naive - k)/k [%]")
+    if contours and k.size > 1 and w.size > 1:
+        lv = sorted(c for c in contours if vmin < c < vmax)
+        if lv:
+            cs = ax.contour(w * MS, k * 1e3, pct, levels=lv, colors="k", linewidths=0.8)
+            ax.clabel(cs, fmt="%g %%", fontsize=7)
+    if w.size > 1 and w.min() > 0 and w.max() / w.min() > 20:
+        ax.set_xscale("log")
+    if k.size > 1 and k.min() > 0 and k.max() / k.min() > 20:
+        ax.set_yscale("log")
+    ax.set_xlabel("exposure W [ms]")
+    ax.set_ylabel("true stiffness k [pN/nm]")
+    ax.set_title(title or "naive equipartition error")
+    return fig
+
+
+def diagnose_ranking(ranking, *, ax=None, thresholds=(2.0, 10.0)):
+    r"""Bar chart of candidate missing effects ranked by information-criterion improvement.
+
+    - `ranking`: list of dicts with keys ``effect`` (canonical name, e.g. ``motion_blur``)
+      and ``delta_aic`` (AIC without the effect minus AIC with it: > 0 means the effect
+      improves the fit); other keys are ignored.
+    - `thresholds`: ``delta_aic`` levels drawn as guides (2: some support, 10: strong).
+
+    **Returns:** Figure with one axes (one bar per effect, best at the top). An empty ranking
+    gives a figure that says that nothing is missing.
+    """
+    rows = [dict(r) for r in ranking]
+    for r in rows:
+        if "effect" not in r or "delta_aic" not in r:
+            raise ValueError(f"each ranking entry needs 'effect' and 'delta_aic'; got {r!r}")
+    rows.sort(key=lambda r: float(r["delta_aic"]), reverse=True)
+    fig, ax = new_figure(figsize=(6.0, 0.45 * max(len(rows), 2) + 1.4), ax=ax)
+    ax.set_xlabel("delta AIC = AIC(without) - AIC(with effect) (dimensionless)")
+    if not rows:
+        ax.text(0.5, 0.5, "no candidate effect improves the fit: nothing is missing",
+                ha="center", va="center", transform=ax.transAxes)
+        ax.set_yticks([])
+        return fig
+    vals = np.array([float(r["delta_aic"]) for r in rows])
+    lo, hi = thresholds
+    colors = ["C3" if v >= hi else "C1" if v >= lo else "0.6" for v in vals]
+    ypos = np.arange(len(rows))[::-1]
+    ax.barh(ypos, vals, color=colors)
+    ax.set_yticks(ypos, [str(r["effect"]) for r in rows])
+    for t in thresholds:
+        ax.axvline(t, color="k", ls=":", lw=0.8)
+    ax.axvline(0.0, color="k", lw=0.8)
+    for y, v in zip(ypos, vals):
+        ax.text(v, y, f" {v:.3g}", va="center", fontsize=8)
+    ax.set_title("missing-effect ranking (red: strong, orange: some support)")
+    return fig
+
+
+__all__ = ["corner", "residuals_before_after", "naive_error_map", "diagnose_ranking"]
