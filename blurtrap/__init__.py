@@ -38,6 +38,7 @@ from .data import (
     save_manifest as save_manifest,
     save_npz as save_npz,
 )
+from .diagnostics import Diagnosis as Diagnosis, compare as compare, diagnose as diagnose
 from .inference import (
     CalibrationResult as CalibrationResult,
     FitError as FitError,

@@ -44,7 +44,7 @@ class DemoConfig:
     fig1_settings: tuple = ((5e-5, 0.537e-3), (5e-5, 0.134e-3), (1.25e-5, 2.148e-3))
     fig1_windows: tuple = (2e-5, 5e-5, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 4e-3, 8e-3, 16e-3)
     fig1_frames: int = 20000
-    posterior_steps: int = 300
+    posterior_steps: int = 200
     psd_models: tuple = ("naive", "naive_aliased", "standard")
     per_power_variance: bool = True  # variance vs exposure at each power (besides joint)
     exact_likelihood: bool = True
@@ -164,7 +164,8 @@ def add_drift(rec, seed: int):
     rng = np.random.default_rng(seed)
     t = np.arange(rec.n_frames) * rec.frame_interval
     ph = rng.uniform(0, 2 * np.pi, 2)
-    drift = 8e-9 * np.sin(2 * np.pi * 0.13 * t + ph[0]) + 5e-9 * np.sin(2 * np.pi * 0.41 * t + ph[1])
+    drift = (8e-9 * np.sin(2 * np.pi * 0.13 * t + ph[0])
+             + 5e-9 * np.sin(2 * np.pi * 0.41 * t + ph[1]))
     return Recording(np.asarray(rec.positions) + drift, frame_interval=rec.frame_interval,
                      exposure=rec.exposure, temperature=rec.temperature,
                      laser_power=rec.laser_power, name=f"{rec.name}+drift")
@@ -217,7 +218,7 @@ def make_row(label, method, model, cfg, powers, ks, kerrs, gamma=None, gamma_err
         "k_pN_per_nm": [None if k is None else k * 1e3 for k in ks],
         "k_err_pN_per_nm": [None if e is None else _f(e * 1e3) for e in kerrs],
         "k_true_pN_per_nm": [truth_k[float(p)] * 1e3 for p in powers],
-        "k_error_pct": [_pct(k, truth_k[float(p)]) for k, p in zip(ks, powers)],
+        "k_error_pct": [_pct(k, truth_k[float(p)]) for k, p in zip(ks, powers, strict=True)],
     }
     g_true = cfg.gamma
     if gamma is None:
@@ -267,7 +268,8 @@ def format_table(rows, cfg: DemoConfig) -> str:
     body = [head, truth]
     for r in rows:
         cells = [r["label"]]
-        by_p = dict(zip(r["power_mW"], zip(r["k_pN_per_nm"], r["k_error_pct"])))
+        pairs = zip(r["k_pN_per_nm"], r["k_error_pct"], strict=True)
+        by_p = dict(zip(r["power_mW"], pairs, strict=True))
         for p in powers:
             k, pct = by_p.get(p, (None, None))
             cells.append(_fmt_k(k, pct))
@@ -277,7 +279,7 @@ def format_table(rows, cfg: DemoConfig) -> str:
     lines = []
     for n, row in enumerate(body):
         lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(row, widths))))
+                               for i, (c, w) in enumerate(zip(row, widths, strict=True))))
         if n == 0:
             lines.append("  ".join("-" * w for w in widths))
     lines.append("(% = error vs truth; * = mean of per-power fits)")
@@ -292,7 +294,8 @@ def markdown_table(rows, cfg: DemoConfig) -> str:
     out.append("| **truth** | " + " | ".join(f"{k * 1e3:.4f}" for k in cfg.ks)
                + f" | {cfg.gamma * 1e6:.4f} | {cfg.tracking_std**2 * 1e18:.3g} |")
     for r in rows:
-        by_p = dict(zip(r["power_mW"], zip(r["k_pN_per_nm"], r["k_error_pct"])))
+        pairs = zip(r["k_pN_per_nm"], r["k_error_pct"], strict=True)
+        by_p = dict(zip(r["power_mW"], pairs, strict=True))
         cells = [r["label"]]
         for p in powers:
             k, pct = by_p.get(p, (None, None))
@@ -353,7 +356,11 @@ def run_posterior(rec, cfg: DemoConfig):
             kw[name] = val
     if "key" in params:
         kw["key"] = jax.random.key(cfg.seed)
-    post = fn(rec, **kw)
+    import warnings
+
+    with warnings.catch_warnings():  # a deliberately short chain: expected warnings
+        warnings.simplefilter("ignore")
+        post = fn(rec, **kw)
     return _posterior_samples(post), post
 
 
@@ -639,7 +646,7 @@ def demo(out="blurtrap-demo", *, quick=False, quiet=False, seed=0, config=None):
                     corr[p] = (r.k, r.k_err)
             if len(corr) < len(powers) and joint is not None:  # --quick: the joint fit
                 kj, ej = _k_by_power(joint, list(recs), powers)
-                corr = {p: (kk, ee) for p, kk, ee in zip(powers, kj, ej)}
+                corr = {p: (kk, ee) for p, kk, ee in zip(powers, kj, ej, strict=True)}
             if len(corr) == len(powers):
                 pfits = {w: res[f"vvp_{w}"] for w in cfg.power_exposures if f"vvp_{w}" in res}
                 attempt("fig4_stiffness_vs_power",

@@ -208,7 +208,7 @@ def format_result(result) -> str:
     from .physics import BOLTZMANN
 
     rows = []
-    for name, v, e in zip(result.param_names, result.values, result.errors):
+    for name, v, e in zip(result.param_names, result.values, result.errors, strict=True):
         base = name.split("[")[0]
         fac, unit = _LAB.get(base, (1.0, "SI"))
         rows.append((name, v * fac, e * fac, unit))
@@ -229,7 +229,7 @@ def format_result(result) -> str:
         ks = result.k_per_recording
         es = result.k_per_recording_err
         if "c" in result.param_names or len(set(map(float, ks))) > 1:
-            for i, (kk, ee) in enumerate(zip(ks, es)):
+            for i, (kk, ee) in enumerate(zip(ks, es, strict=True)):
                 rows.append((f"k (recording {i})", kk * 1e3, ee * 1e3, "pN/nm"))
     w = max(len(r[0]) for r in rows)
     lines = [f"method: {result.method}   model: {result.model}   recordings: "
@@ -299,6 +299,14 @@ def main(argv=None) -> int:
         if args.command == "calibrate":
             return _calibrate(args)
         raise CliError(f"unknown command {args.command!r}")  # pragma: no cover
+    except BrokenPipeError:  # output piped into e.g. `head`: not an error
+        import os
+
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):  # pragma: no cover
+            pass
+        return 0
     except KeyboardInterrupt:  # pragma: no cover
         print(f"blurtrap {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -8,6 +8,7 @@ from ._likelihood import (
     periodogram as periodogram,
     whittle_loglik as whittle_loglik,
 )
+from ._effects import EFFECTS as EFFECTS, AbstractEffect as AbstractEffect, make_effect as make_effect
 from ._models import TrapModel as TrapModel, get_model as get_model
 from ._result import CalibrationResult as CalibrationResult, FitError as FitError
 from ._variance import (

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._config import float64_scope, warn_if_float32
 from ..physics._constants import BOLTZMANN
-from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton
+from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton, fit_nll_only
 from ._models import TrapModel, get_model
 from ._problems import (
     SpectralArgs,
@@ -140,7 +140,14 @@ def temporal_information(rec, z_min=5.0):
     return bool(z > z_min and 0.05 < ratio < 1.0), z
 
 
-def _start_vector(recs, layout, noise):
+def _start_vector(recs, layout, noise, start=None):
+    if start:
+        missing = [n for n in layout.names if n not in start]
+        if not missing:
+            return jnp.asarray(np.array([float(start[n]) for n in layout.names]))
+        base = _start_vector(recs, layout, noise)
+        return jnp.asarray(np.array([float(start.get(n, base[i]))
+                                     for i, n in enumerate(layout.names)]))
     starts = np.array([moment_start(r)[:3] for r in recs])
     ks = starts[:, 0]
     if layout.linear_power:
@@ -151,7 +158,31 @@ def _start_vector(recs, layout, noise):
     vec = list(kvec) + [np.median(starts[:, 1])]
     if noise:
         vec.append(np.median(starts[:, 2]))
+    for name in getattr(layout, "extra_names", ()):
+        vec.append(effect_start(name, recs, float(np.median(starts[:, 1]))))
     return jnp.asarray(np.array(vec, dtype=float))
+
+
+def effect_start(name: str, recs, gamma: float) -> float:
+    """Rough, positive start values for effect parameters (refined by the fit)."""
+    c0 = float(np.median([np.var(np.asarray(r.positions)) for r in recs]))
+    dur = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
+    fs = float(np.median([1.0 / float(r.frame_interval) for r in recs]))
+    powers = [float(r.laser_power) for r in recs if r.laser_power is not None]
+    temp = float(np.median([float(r.temperature) for r in recs]))
+    table = {
+        "drift_diffusion": 0.01 * c0 / dur,
+        "line_amplitude": 0.1 * math.sqrt(c0),
+        "rise_fraction": 0.1,
+        "f3db": min(0.25 * fs, 8000.0),
+        "diode_alpha": 0.3,
+        "hydro_radius": gamma / (6 * math.pi * 2.414e-5 * 10 ** (247.8 / (temp - 140.0))),
+        "power_offset": 0.05 * min(powers) if powers else 1e-3,
+        "heating": 10.0,
+    }
+    if name not in table:
+        raise ValueError(f"no start value rule for effect parameter {name!r}")
+    return table[name]
 
 
 # ------------------------------------------------------------------------------------------
@@ -190,10 +221,14 @@ def spectral_gof(ratio, weight, n_params, min_dof=64):
 # spectral (Whittle / blocked) and exact likelihood fits
 # ------------------------------------------------------------------------------------------
 def _spectral_args(recs, layout, model, n_blocks, f_range):
-    fs, ps, ws = [], [], []
+    """Periodogram ordinates of all recordings. For blocked spectra (``n_blocks > 1``) the
+    model is the exact expected block periodogram (leakage of the finite block included);
+    for the full-record Whittle likelihood the leakage is O(1/N) and P_d(f) is used."""
+    fs, ps, ws, ms = [], [], [], []
     for r in recs:
         nb = max(int(n_blocks), 1)
         f, p, m = _np_periodogram(r.positions, float(r.frame_interval), nb)
+        ms.append(m)
         wt = np.full(f.shape, float(nb))
         if m % 2 == 0:
             wt[-1] *= 0.5  # Nyquist ordinate is chi^2_1
@@ -223,6 +258,8 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
         power=jnp.asarray(pad(ps, ref)),
         weight=jnp.asarray(pad(ws, 0.0)),
         log_ref=jnp.asarray(np.log(ref)),
+        block_len=(jnp.asarray(np.array(ms, dtype=float))
+                   if n_blocks > 1 and model.alias and model.closed_form else None),
     )
 
 
@@ -257,10 +294,13 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         idx = np.asarray(layout.k_index)
         k_rec = values[:nk][idx]
         k_err = np.sqrt(np.clip(np.diag(cov)[:nk], 0, None))[idx]
+    if "power_offset" in names:
+        p0 = values[names.index("power_offset")]
+        k_rec = k_rec * (1.0 - p0 / np.asarray(layout.power))
     at_bounds = []
     if layout.noise:
         c0 = np.mean([np.var(np.asarray(r.positions)) for r in recs])
-        if values[-1] < 1e-6 * c0:
+        if values[names.index("tracking_var")] < 1e-6 * c0:
             at_bounds.append("tracking_var")
     temps = {float(r.temperature) for r in recs}
     return CalibrationResult(
@@ -282,15 +322,38 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
     )
 
 
-def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes):
+def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None):
     args = _spectral_args(recs, layout, model, n_blocks, f_range)
-    scale = _start_vector(recs, layout, model.noise)
+    scale = _start_vector(recs, layout, model.noise, start)
     out = fit_ml(spectral_nll, scale, args)
     _check_fit(out, layout.names, method_name)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
-    extras = {"n_blocks": n_blocks, "nll": float(out.nll)}
+    extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
+              "f": np.asarray(args.f), "ratio": np.asarray(args.power / psd),
+              "weight": np.asarray(args.weight)}
     return _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras)
+
+
+@float64_scope
+def screen_model(recs, model, k, start=None):
+    """Whittle fit of ``model`` without standard errors: ``(params dict, nll, gof, ok)``.
+    Same ordinates and objective as ``calibrate(method='likelihood', likelihood='whittle')``
+    so that log-likelihoods of nested models are comparable."""
+    mdl = get_model(model)
+    layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
+    args = _spectral_args(recs, layout, mdl, 1, None)
+    scale = _start_vector(recs, layout, mdl.noise, start)
+    p, nll, ok = fit_nll_only(spectral_nll, scale, args)
+    psd = _psd_jit(jnp.asarray(p), args)
+    gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
+    return dict(zip(layout.names, map(float, p))), nll, gof, ok
+
+
+def _k_mode_of(layout):
+    if layout.linear_power:
+        return "linear_power"
+    return "shared" if layout.n_k == 1 else "per_group"
 
 
 def _fit_exact(recs, layout, model, notes):
@@ -364,8 +427,8 @@ def _equipartition(recs, diffusion, pade):
             ks.append(k)
             kerr.append(abs(dk) * se)
     if diffusion is None:
-        notes.append("naive equipartition k = kT/var(X_m): biased low by motion blur "
-                     "(var is reduced by S(alpha)) and high by tracking noise")
+        notes.append("naive equipartition k = kT/var(X_m): biased high by motion blur "
+                     "(var is reduced by S(alpha)) and low by tracking noise (var is raised)")
         gamma, gerr = math.nan, math.nan
     else:
         notes.append(f"blur-corrected equipartition with given D = {diffusion:.4g} m^2/s "
@@ -404,6 +467,7 @@ def calibrate(
     f_range=None,
     diffusion: float | None = None,
     pade: bool = False,
+    start: dict | None = None,
 ) -> CalibrationResult:
     """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
 
@@ -424,6 +488,8 @@ def calibrate(
     - `n_blocks`: blocks for ``method="psd"`` (default: 128 blocks, at least 64 frames each).
     - `f_range`: ``(f_min, f_max)`` [Hz] fitted in the spectral methods.
     - `diffusion`, `pade`: for blur-corrected equipartition.
+    - `start`: optional start values by parameter name (SI), e.g. from a previous fit
+      (``result.params``); missing names use the closed-form starts.
 
     **Returns:** :class:`CalibrationResult` (SI units).
 
@@ -471,21 +537,32 @@ def calibrate(
 
     if k is None:
         k = "linear_power" if method == "variance_vs_power" else _default_k_mode(recs)
-    layout = make_layout(recs, k, mdl.noise)
+    if mdl.has("power_offset") and k != "linear_power":
+        raise ValueError("the power_offset effect needs k='linear_power' (k = c (P - P0))")
+    layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
 
+    if mdl.extra and method in ("variance_vs_exposure", "variance_vs_power"):
+        raise ValueError(f"method {method!r} fits only the core model; effects "
+                         f"{[e.name for e in mdl.extra]} need method='likelihood' or 'psd'")
     if method == "likelihood":
         use = likelihood
         if use == "auto":
             use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
+        if use == "exact" and mdl.extra:
+            if likelihood == "exact":
+                raise ValueError("the exact time-domain likelihood covers the closed-form "
+                                 "model only; use likelihood='whittle' with effects "
+                                 f"{[e.name for e in mdl.extra]}")
+            use = "whittle"
         notes.append(f"likelihood: {use}")
         if use == "exact":
             return _fit_exact(recs, layout, mdl, notes)
-        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes)
+        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes, start)
     if method == "psd":
         nb = n_blocks
         if nb is None:
             nb = max(1, min(128, min(r.n_frames for r in recs) // 64))
-        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes)
+        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start)
     if method in ("variance_vs_exposure", "variance_vs_power"):
         if method == "variance_vs_power" and k != "linear_power":
             warnings.warn("variance_vs_power is usually run with k='linear_power'", stacklevel=2)

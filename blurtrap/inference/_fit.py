@@ -134,6 +134,19 @@ def fit_ml_batch(nll, scale, args, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOu
 
 
 @eqx.filter_jit
+def _bfgs_value_only(nll, scale, args, rtol, atol, max_steps):
+    f, x, ok, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
+    return scale * jnp.exp(x), f(x, args), ok
+
+
+def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=400):
+    """Minimum of ``nll`` (BFGS; no Hessian, so compilation is cheap): ``(p, nll, ok)``.
+    For screening many candidate models where only the likelihood ratio is needed."""
+    p, v, ok = _bfgs_value_only(nll, scale, args, rtol, atol, max_steps)
+    return p, float(v), bool(ok)
+
+
+@eqx.filter_jit
 def _value_grad_batch(nll, scale, args, xs):
     f = _log_objective(nll, scale)
     return jax.vmap(jax.value_and_grad(f), in_axes=(0, None))(xs, args)

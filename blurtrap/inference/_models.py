@@ -1,18 +1,22 @@
-r"""Trap models for inference: what a parameter set predicts for one recording.
+r"""Trap models for inference: what a parameter set predicts for one or more recordings.
 
-A model turns physical parameters (``k`` [N/m], ``gamma`` [N s/m], ``tracking_var`` [m^2])
-and a recording's acquisition settings (frame interval, exposure, temperature) into
-
-- ``moments``: (C(0), C(1), rho) of the frame process, for the exact likelihood;
-- ``psd``: the two-sided discrete PSD at given frequencies, for Whittle / blocked fits;
-- ``variance``: the frame variance C(0), for variance-based methods.
-
-Three named starting models (DESIGN section 3):
+A model is the harmonic trap plus effects (:mod:`._effects`). Three flags carry the paper's
+core (``motion_blur``, ``aliasing``, ``tracking_noise``); further effects are appended with
+``model + "drift"`` or ``model.add("drift", "line_noise")``. Named starting models
+(DESIGN section 3):
 
 - ``naive``: instantaneous sampling, no blur, no aliasing, no tracking noise (PSD: the
   Lorentzian; time domain: AR(1));
+- ``naive_aliased``: the Lorentzian folded at fs (no blur, no noise);
 - ``blur``: naive + ``motion_blur`` + ``aliasing`` (the paper's core, exact closed form);
 - ``standard``: blur + ``tracking_noise`` (eps^2 >= 0), the default.
+
+The model predicts
+
+- ``moments``: (C(0), C(1), rho) of the frame process, for the exact likelihood (closed-form
+  models only);
+- ``psd``: the two-sided discrete PSD, for Whittle / blocked fits (all effects);
+- ``variance``: the frame variance C(0).
 """
 
 from __future__ import annotations
@@ -22,39 +26,95 @@ import jax.numpy as jnp
 
 from ..physics._blur import _blur_factor, _rho_b
 from ..physics._constants import BOLTZMANN
-from ..physics._spectra import _psd_coeffs
+from ..physics._effects import fold_sum, water_viscosity
+from ..physics._spectra import _expected_block_periodogram, _psd_coeffs
+from ._effects import EFFECTS, AbstractEffect, make_effect
 
 MODEL_NAMES = ("naive", "naive_aliased", "blur", "standard")
+_FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}
 
 
 class TrapModel(eqx.Module):
-    """Harmonic trap seen through a detector. Flags are static configuration."""
+    """Harmonic trap seen through a detector, plus effects. All configuration is static."""
 
     blur: bool = eqx.field(static=True, default=True)
     alias: bool = eqx.field(static=True, default=True)
     noise: bool = eqx.field(static=True, default=True)
     name: str = eqx.field(static=True, default="standard")
+    extra: tuple = eqx.field(static=True, default=())
+    n_alias: int = eqx.field(static=True, default=25)
+
+    # ---- composition -----------------------------------------------------------------
+    def add(self, *effects, **config) -> TrapModel:
+        """A new model with the given effects (canonical names or instances) added."""
+        model = self
+        for e in effects:
+            name = e.name if isinstance(e, AbstractEffect) else e
+            if name in _FLAGS:
+                model = TrapModel(blur=model.blur or name == "motion_blur",
+                                  alias=model.alias or name == "aliasing",
+                                  noise=model.noise or name == "tracking_noise",
+                                  name=f"{model.name}+{name}", extra=model.extra,
+                                  n_alias=model.n_alias)
+                continue
+            eff = make_effect(e, **config)
+            if any(x.name == eff.name for x in model.extra):
+                raise ValueError(f"effect {eff.name!r} is already in the model")
+            if eff.kind in ("histogram", "timestamps"):
+                raise ValueError(
+                    f"effect {eff.name!r} ({eff.kind}) is not part of the Gaussian likelihood; "
+                    "diagnose() tests it from the frame histogram / time stamps"
+                )
+            model = TrapModel(blur=model.blur, alias=model.alias, noise=model.noise,
+                              name=f"{model.name}+{eff.name}", extra=model.extra + (eff,),
+                              n_alias=model.n_alias)
+        return model
+
+    def __add__(self, effect) -> TrapModel:
+        if isinstance(effect, (list, tuple)):
+            return self.add(*effect)
+        return self.add(effect)
 
     @property
     def effects(self) -> tuple[str, ...]:
-        out = []
-        if self.blur:
-            out.append("motion_blur")
-        if self.alias:
-            out.append("aliasing")
-        if self.noise:
-            out.append("tracking_noise")
-        return tuple(out)
+        out = [n for n, flag in _FLAGS.items() if getattr(self, flag)]
+        return tuple(out) + tuple(e.name for e in self.extra)
+
+    def has(self, name: str) -> bool:
+        return name in self.effects
+
+    @property
+    def extra_params(self):
+        return tuple(p for e in self.extra for p in e.params)
 
     @property
     def param_names(self) -> tuple[str, ...]:
-        return ("k", "gamma", "tracking_var") if self.noise else ("k", "gamma")
+        core = ("k", "gamma", "tracking_var") if self.noise else ("k", "gamma")
+        return core + tuple(p.name for p in self.extra_params)
+
+    @property
+    def closed_form(self) -> bool:
+        return all(e.kind in ("additive", "relation") for e in self.extra)
 
     def _w(self, exposure):
         return exposure if self.blur else jnp.zeros_like(exposure)
 
+    # ---- relations across recordings ---------------------------------------------------
+    def relations(self, k_rec, gamma, temperature, power, extras):
+        """Apply relation effects: returns per-recording (k, gamma, temperature)."""
+        gamma_rec = gamma * jnp.ones_like(k_rec)
+        temp = temperature
+        for e in self.extra:
+            if e.name == "power_offset":
+                k_rec = k_rec * (1.0 - extras["power_offset"] / power)
+            elif e.name == "laser_heating":
+                temp = temperature + extras["heating"] * power
+                gamma_rec = gamma_rec * water_viscosity(temp) / water_viscosity(temperature)
+        return k_rec, gamma_rec, temp
+
+    # ---- predictions -----------------------------------------------------------------
     def moments(self, k, gamma, eps2, frame_interval, exposure, temperature):
-        """(C0, C1, rho) of the frames; eps2 is ignored unless the model has noise."""
+        """(C0, C1, rho) of the frames (closed-form models); eps2 ignored without noise."""
         sigma2 = BOLTZMANN * temperature / k
         tau = gamma / k
         a = self._w(exposure) / tau
@@ -63,24 +123,71 @@ class TrapModel(eqx.Module):
         c1 = sigma2 * _rho_b(a, r)
         return c0, c1, jnp.exp(-r)
 
-    def psd(self, f, k, gamma, eps2, frame_interval, exposure, temperature, s2=None):
+    def psd(self, f, k, gamma, eps2, frame_interval, exposure, temperature, s2=None,
+            extras=None, block_len=None):
         """Discrete two-sided PSD at frequencies ``f`` (shape (R, M)) of R recordings whose
-        settings ``k``, ``frame_interval``, ``exposure``, ``temperature`` have shape (R,).
-        Per-recording coefficients are computed once and broadcast (no gathers, so the
-        gradient and Hessian stay cheap). ``s2 = sin^2(pi f dt)`` may be precomputed."""
+        ``k``, ``gamma``, ``frame_interval``, ``exposure``, ``temperature`` have shape (R,)
+        (or broadcast). Per-recording coefficients are computed once and broadcast.
+        ``s2 = sin^2(pi f dt)`` may be precomputed. With ``block_len`` (frames per block,
+        shape (R,)) a closed-form aliased model returns the exact *expected periodogram* of a
+        block of that length (finite-block leakage included) instead of P_d(f)."""
+        extras = extras or {}
         sigma2 = BOLTZMANN * temperature / k
-        tau = gamma / k
+        tau = gamma / k * jnp.ones_like(sigma2)
         e2 = (eps2 if self.noise else 0.0) * jnp.ones_like(sigma2)
-        w = self._w(exposure)
-        if self.alias:
-            dt, omr, rho, c_a, c_b, e2 = (c[:, None] for c in
-                                          _psd_coeffs(sigma2, tau, w, frame_interval, e2))
-            if s2 is None:
-                s2 = jnp.sin(jnp.pi * f * dt) ** 2
-            return dt * ((c_a - s2 * c_b) / (omr**2 + 4.0 * rho * s2) + e2)
-        s2_, t2, w2, dt2, e22 = (c[:, None] for c in (sigma2, tau, w, frame_interval, e2))
-        lor = 2.0 * s2_ * t2 / (1.0 + (2.0 * jnp.pi * f * t2) ** 2)
-        return lor * jnp.sinc(f * w2) ** 2 + e22 * dt2
+        w = self._w(exposure) * jnp.ones_like(sigma2)
+        dt = frame_interval * jnp.ones_like(sigma2)
+        col = lambda x: x[:, None]  # noqa: E731
+        if self.closed_form and self.alias and block_len is not None:
+            out = _expected_block_periodogram(f, col(block_len), col(sigma2), col(tau), col(w),
+                                              col(dt), col(e2))
+        elif self.closed_form:
+            if self.alias:
+                dt_, omr, rho, c_a, c_b, e2_ = (col(c) for c in _psd_coeffs(sigma2, tau, w, dt, e2))
+                if s2 is None:
+                    s2 = jnp.sin(jnp.pi * f * dt_) ** 2
+                out = dt_ * ((c_a - s2 * c_b) / (omr**2 + 4.0 * rho * s2) + e2_)
+            else:
+                lor = 2.0 * col(sigma2) * col(tau) / (1.0 + (2.0 * jnp.pi * f * col(tau)) ** 2)
+                out = lor * jnp.sinc(f * col(w)) ** 2 + col(e2) * col(dt)
+        else:
+            out = self._psd_folded(f, sigma2, tau, w, dt, temperature, extras) + col(e2 * dt)
+        for e in self.extra:
+            if e.kind == "additive":
+                out = out + e.psd_add(f, col(dt), extras)
+        return out
+
+    def _psd_folded(self, f, sigma2, tau, w, dt, temperature, extras):
+        hydro = next((e for e in self.extra if e.kind == "friction"), None)
+        kernel = next((e for e in self.extra if e.name == "exposure_kernel"), None)
+        filters = [e for e in self.extra if e.name == "detector_filter"]
+        temp = temperature * jnp.ones_like(sigma2)
+        c3 = lambda x: x[:, None, None]  # noqa: E731
+
+        def cont(ff):
+            if hydro is not None:
+                p = hydro.lorentzian(ff, c3(sigma2), c3(tau), c3(temp), extras)
+            else:
+                p = 2.0 * c3(sigma2) * c3(tau) / (1.0 + (2.0 * jnp.pi * ff * c3(tau)) ** 2)
+            if self.blur:
+                if kernel is not None:
+                    p = p * kernel.rect_replacement(ff, c3(w), extras)
+                else:
+                    p = p * jnp.sinc(ff * c3(w)) ** 2
+            for e in filters:
+                p = p * e.transfer(ff, c3(w), extras)
+            return p
+
+        if not self.alias:
+            return cont(f[..., None])[..., 0]
+        tail = 0.0
+        if not self.blur and hydro is None:
+            d = sigma2 / tau  # kT/gamma
+            tail = d / (2.0 * jnp.pi**2)
+            for e in filters:
+                tail = tail * e.transfer_inf(extras)
+            tail = tail[:, None]
+        return fold_sum(cont, f, (1.0 / dt)[:, None], self.n_alias, tail)
 
     def variance(self, k, gamma, eps2, exposure, temperature):
         sigma2 = BOLTZMANN * temperature / k
@@ -89,17 +196,26 @@ class TrapModel(eqx.Module):
 
 
 def get_model(model) -> TrapModel:
-    """Resolve a model given by name (``naive``, ``naive_aliased``, ``blur``, ``standard``)."""
+    """Resolve a model: a ``TrapModel``, a name (``naive``, ``naive_aliased``, ``blur``,
+    ``standard``) or a name with effects (``"standard+drift+line_noise"``)."""
     if isinstance(model, TrapModel):
         return model
     if model is None:
         model = "standard"
+    base, *more = str(model).split("+")
     table = {
         "naive": TrapModel(blur=False, alias=False, noise=False, name="naive"),
         "naive_aliased": TrapModel(blur=False, alias=True, noise=False, name="naive_aliased"),
         "blur": TrapModel(blur=True, alias=True, noise=False, name="blur"),
         "standard": TrapModel(blur=True, alias=True, noise=True, name="standard"),
     }
-    if model not in table:
-        raise ValueError(f"model must be one of {sorted(table)}; got model = {model!r}")
-    return table[model]
+    if base not in table:
+        raise ValueError(f"model must be one of {sorted(table)} (optionally '+effect'); "
+                         f"got model = {model!r}")
+    out = table[base]
+    for name in more:
+        if name not in EFFECTS:
+            raise ValueError(f"unknown effect {name!r} in model {model!r}; canonical names: "
+                             f"{sorted(EFFECTS)}")
+        out = out.add(name)
+    return out

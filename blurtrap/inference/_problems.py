@@ -33,6 +33,12 @@ class Layout(eqx.Module):
     noise: bool = eqx.field(static=True)
     names: tuple = eqx.field(static=True)
     k_labels: tuple = eqx.field(static=True)
+    extra_names: tuple = eqx.field(static=True, default=())
+
+    def unpack_extras(self, p) -> dict:
+        """Effect parameters (after the core ones) by name."""
+        n0 = len(self.names) - len(self.extra_names)
+        return {name: p[n0 + i] for i, name in enumerate(self.extra_names)}
 
     def unpack(self, p):
         nk = 1 if self.linear_power else self.n_k
@@ -45,7 +51,7 @@ class Layout(eqx.Module):
         return k_rec, gamma, eps2
 
 
-def make_layout(recordings, k_mode: str, noise: bool) -> Layout:
+def make_layout(recordings, k_mode: str, noise: bool, extra_names: tuple = ()) -> Layout:
     if k_mode not in K_MODES:
         raise ValueError(f"k must be one of {K_MODES}; got k = {k_mode!r}")
     n = len(recordings)
@@ -71,8 +77,9 @@ def make_layout(recordings, k_mode: str, noise: bool) -> Layout:
         idx = np.zeros(n, dtype=np.int32)
         labels = ("c",)
     linear = k_mode == "linear_power"
-    names = labels + ("gamma",) + (("tracking_var",) if noise else ())
+    names = labels + ("gamma",) + (("tracking_var",) if noise else ()) + tuple(extra_names)
     return Layout(
+        extra_names=tuple(extra_names),
         k_index=jnp.asarray(idx),
         power=jnp.asarray(np.nan_to_num(powers, nan=0.0)),
         n_k=len(labels),
@@ -109,11 +116,17 @@ class SpectralArgs(eqx.Module):
     power: jax.Array  # (R, M) [m^2/Hz]
     weight: jax.Array  # (R, M): n_blocks (1/2 at Nyquist), 0 on padding
     log_ref: jax.Array
+    block_len: jax.Array | None = None  # (R,) frames per block: exact expected periodogram
 
 
 def spectral_model_psd(p, a: SpectralArgs):
     k_rec, gamma, eps2 = a.layout.unpack(p)
-    return a.model.psd(a.f, k_rec, gamma, eps2, a.meta.dt, a.meta.w, a.meta.temp, s2=a.s2)
+    extras = a.layout.unpack_extras(p)
+    temp = a.meta.temp
+    if a.model.extra:
+        k_rec, gamma, temp = a.model.relations(k_rec, gamma, temp, a.layout.power, extras)
+    return a.model.psd(a.f, k_rec, gamma, eps2, a.meta.dt, a.meta.w, temp, s2=a.s2,
+                       extras=extras, block_len=a.block_len)
 
 
 def spectral_nll(p, a: SpectralArgs):

@@ -12,7 +12,7 @@ from ..physics._constants import BOLTZMANN
 
 LAB = {  # name: (factor from SI, lab unit)
     "k": (1e3, "pN/nm"),
-    "c": (1.0, "pN/nm/W"),
+    "c": (1e3, "pN/nm/W"),
     "gamma": (1e6, "pN s/um"),
     "diffusion": (1e12, "um^2/s"),
     "tracking_var": (1e18, "nm^2"),

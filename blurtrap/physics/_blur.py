@@ -44,6 +44,7 @@ def _split(a, cut=None):
     The cut is 0.1 in float64 and 1.0 in lower precision (where 10 terms still truncate
     below float32 resolution and the closed form would lose ~20 ulp at 0.1)."""
     if cut is None:
+        a = jnp.asarray(a)
         cut = _SERIES_CUT if jnp.finfo(a.dtype).bits >= 64 else 1.0
     small = a < cut
     return small, jnp.where(small, a, 0.0), jnp.where(small, 1.0, a)

@@ -71,6 +71,32 @@ def _psd_from_coeffs(f, coeffs):
     return dt * ((c_a - s2 * c_b) / (one_m_rho**2 + 4.0 * rho * s2) + eps2)
 
 
+def _expected_block_periodogram(f, block_len, sigma2, tau, w, dt, eps2):
+    """Exact expectation of the periodogram of a block of M frames at Fourier frequencies
+    f = j/(M dt), j = 1..M/2 (block mean removed, which only affects j = 0):
+
+    E[I_j] = dt [C(0) + 2 Re sum_{n=1}^{M-1} (1 - n/M) C(n) e^{-i theta n}],  theta = 2 pi f dt,
+
+    summed in closed form for C(n) = C(1) rho^(n-1): with q = rho e^{-i theta} and q^M = rho^M,
+    sum q^n = (q - rho^M)/(1 - q) and sum n q^n = (q - M rho^M + (M-1) rho^M q)/(1 - q)^2.
+    Unlike P_d(f) it contains the Fejer-kernel leakage of a finite block exactly.
+    """
+    a = w / tau
+    r = dt / tau
+    c0 = sigma2 * _blur_factor(a) + eps2
+    c1 = sigma2 * _rho_b(a, r)
+    rho = jnp.exp(-r)
+    m = block_len
+    th = 2.0 * jnp.pi * f * dt
+    q = rho * jnp.exp(-1j * th)
+    rho_m = jnp.exp(-r * m)
+    one_m_q = 1.0 - q
+    s1 = (q - rho_m) / one_m_q
+    s2 = (q - m * rho_m + (m - 1.0) * rho_m * q) / one_m_q**2
+    tot = (s1 - s2 / m) / rho
+    return dt * (c0 + 2.0 * c1 * jnp.real(tot))
+
+
 def _psd_discrete(f, sigma2, tau, w, dt, eps2):
     """Closed-form aliased, blurred, noisy discrete two-sided PSD, no input checks.
 

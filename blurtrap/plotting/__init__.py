@@ -15,17 +15,35 @@ The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 from ._common import LAB_UNITS as LAB_UNITS
 from ._extra import (
     corner as corner,
+)
+from ._extra import (
     diagnose_ranking as diagnose_ranking,
+)
+from ._extra import (
     naive_error_map as naive_error_map,
+)
+from ._extra import (
     residuals_before_after as residuals_before_after,
 )
 from ._paper import (
     fig1a_universal_curve as fig1a_universal_curve,
+)
+from ._paper import (
     fig1b_histogram as fig1b_histogram,
+)
+from ._paper import (
     fig3_fractional_variance as fig3_fractional_variance,
+)
+from ._paper import (
     fig4_stiffness_vs_power as fig4_stiffness_vs_power,
+)
+from ._paper import (
     fig5_highpass as fig5_highpass,
+)
+from ._paper import (
     fig6_psd as fig6_psd,
+)
+from ._paper import (
     fig7_deviation as fig7_deviation,
 )
 

@@ -183,7 +183,8 @@ def kT(temperature=DEFAULT_TEMPERATURE):
 
 
 FIT_STYLE = {
-    "standard": dict(color="C3", ls="-", lw=1.8, label="blur-corrected, aliased + noise (standard)"),
+    "standard": dict(color="C3", ls="-", lw=1.8,
+                     label="blur-corrected, aliased + noise (standard)"),
     "blur": dict(color="C3", ls="-", lw=1.8, label="blur-corrected, aliased (blur)"),
     "naive": dict(color="C0", ls="--", lw=1.5, label="naive Lorentzian (naive)"),
     "naive_aliased": dict(color="C2", ls=":", lw=1.8, label="naive aliased (naive_aliased)"),

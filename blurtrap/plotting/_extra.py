@@ -117,7 +117,7 @@ def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("b
     nb = fit_n_blocks(fit_b, recording, n_blocks)
     f, p, nb = blocked_psd(recording, nb)
     fig, axes = new_figure(2, 1, figsize=(6.4, 5.6), sharex=True)
-    for ax, fit, tag in zip(axes, (fit_a, fit_b), labels):
+    for ax, fit, tag in zip(axes, (fit_a, fit_b), labels, strict=False):
         ratio = p / model_psd(fit, recording, f)
         fb, rb, cnt = _binned(f, ratio)
         band = 1.0 / np.sqrt(nb * cnt)
@@ -217,7 +217,7 @@ def diagnose_ranking(ranking, *, ax=None, thresholds=(2.0, 10.0)):
     for t in thresholds:
         ax.axvline(t, color="k", ls=":", lw=0.8)
     ax.axvline(0.0, color="k", lw=0.8)
-    for y, v in zip(ypos, vals):
+    for y, v in zip(ypos, vals, strict=True):
         ax.text(v, y, f" {v:.3g}", va="center", fontsize=8)
     ax.set_title("missing-effect ranking (red: strong, orange: some support)")
     return fig

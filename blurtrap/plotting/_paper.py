@@ -205,7 +205,7 @@ def fig3_fractional_variance(recordings, params, *, ax=None):
     recs = _as_list(recordings)
     ks, g, e2 = _per_recording_k(params, len(recs))
     groups: dict = {}
-    for r, kk in zip(recs, ks):
+    for r, kk in zip(recs, ks, strict=True):
         groups.setdefault(r.laser_power, []).append((r, kk))
     fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
     markers = "os^Dv<>P"
@@ -222,7 +222,8 @@ def fig3_fractional_variance(recordings, params, *, ax=None):
         kk = items[0][1]
         lab = (f"P = {power * 1e3:.4g} mW, k = {kk * 1e3:.3g} pN/nm" if power is not None
                else f"k = {kk * 1e3:.3g} pN/nm")
-        ax.errorbar(np.asarray(al), np.asarray(fr), yerr=np.asarray(er), fmt=markers[j % len(markers)], ms=5, capsize=2,
+        ax.errorbar(np.asarray(al), np.asarray(fr), yerr=np.asarray(er),
+                    fmt=markers[j % len(markers)], ms=5, capsize=2,
                     ls="none", label=lab)
         a_all.extend(al)
     a_all = np.asarray(a_all)

@@ -1,0 +1,208 @@
+"""The `blurtrap` command line, run in-process through `blurtrap.cli.main` (plus one
+subprocess for the installed entry point)."""
+
+import json
+import math
+import os
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+from blurtrap.cli import main
+
+KT = 1.380649e-23 * 295.0
+
+
+def test_help_subprocess():
+    exe = pathlib.Path(sys.executable).with_name("blurtrap")
+    cmd = [str(exe), "--help"] if exe.exists() else [sys.executable, "-m", "blurtrap.cli",
+                                                       "--help"]
+    env = dict(os.environ, MPLBACKEND="Agg")
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    for command in ("demo", "simulate", "calibrate"):
+        assert command in out.stdout
+
+
+@pytest.mark.parametrize("command, flag", [("demo", "--quick"), ("simulate", "--exposure-ms"),
+                                           ("calibrate", "--method")])
+def test_every_command_has_help(command, flag, capsys):
+    assert main([command, "--help"]) == 0
+    assert flag in capsys.readouterr().out
+
+
+def test_demo_quick(tmp_path, capsys):
+    out = tmp_path / "demo"
+    rc = main(["demo", "--quick", "--json", "--out", str(out)])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert cap.err == ""  # --json is quiet
+    summary = json.loads(cap.out)
+    assert summary["ok"] is True
+    report = (out / "report.md").read_text()
+    assert json.loads((out / "results.json").read_text())["ok"] is True
+    for name in ("fig1a_universal_curve", "fig1b_histogram", "fig3_fractional_variance",
+                 "fig4_stiffness_vs_power", "fig5_highpass", "fig6_psd", "fig7_deviation",
+                 "naive_error_map"):
+        assert (out / f"{name}.png").stat().st_size > 5000, name
+        assert f"]({name}.png)" in report
+    assert "pN/nm" in report and "pN s/um" in report
+    rows = {r["label"]: r for r in summary["results"]}
+    # naive equipartition over-estimates k at 2 ms, the more the stiffer the trap
+    naive = rows["naive equipartition, W = 2 ms"]["k_error_pct"]
+    assert naive[0] > 10 and naive[-1] > 60 and naive == sorted(naive)
+    # the joint blur-corrected fit recovers k and gamma
+    joint = rows["variance vs exposure, joint"]
+    assert max(abs(e) for e in joint["k_error_pct"]) < 5
+    assert abs(joint["gamma_error_pct"]) < 10
+    steps = {s["step"]: s["status"] for s in summary["steps"]}
+    assert steps["exact likelihood"] == "skipped"
+    assert "failed" not in steps.values()
+
+
+def test_demo_table_progress_and_posterior(tmp_path, capsys, monkeypatch):
+    """Without --json: progress on stderr, the lab-unit table on stdout; a posterior is used
+    when `blurtrap.inference.sample_posterior` exists (tiny config, stand-in sampler)."""
+    import numpy as np
+
+    import blurtrap._demo as demo_mod
+    import blurtrap.inference as inference
+
+    calls = {}
+
+    class FakePosterior:
+        def __init__(self, samples):
+            self.samples = samples
+
+    def fake_sample_posterior(data, *, n_steps=2000, n_walkers=32, seed=0, progress=False):
+        calls.update(n_steps=n_steps, n_walkers=n_walkers, seed=seed)
+        rng = np.random.default_rng(seed)
+        return FakePosterior({"k": 1e-5 * (1 + 0.01 * rng.standard_normal(400)),
+                              "gamma": 2.74e-8 * (1 + 0.02 * rng.standard_normal(400))})
+
+    monkeypatch.setattr(inference, "sample_posterior", fake_sample_posterior, raising=False)
+    tiny = demo_mod.DemoConfig(n_frames=4096, fig1_frames=1000, exact_likelihood=False,
+                               posterior=True, psd_models=(), per_power_variance=False,
+                               power_exposures=())
+    monkeypatch.setattr(demo_mod, "quick_config", lambda seed=0: tiny)
+    rc = main(["demo", "--quick", "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert "simulate exposure series" in cap.err and "done" in cap.err
+    assert "k @ 100 mW [pN/nm]" in cap.out and "gamma [pN s/um]" in cap.out
+    assert "truth" in cap.out and "%" in cap.out
+    assert calls == {"n_steps": tiny.posterior_steps, "n_walkers": 16, "seed": 0}
+    assert "posterior median" in cap.out
+    assert (tmp_path / "corner.png").exists()
+
+
+def test_demo_without_posterior_says_so(tmp_path, capsys, monkeypatch):
+    import blurtrap._demo as demo_mod
+    import blurtrap.inference as inference
+
+    monkeypatch.delattr(inference, "sample_posterior", raising=False)
+    tiny = demo_mod.DemoConfig(n_frames=4096, fig1_frames=1000, exact_likelihood=False,
+                               posterior=True, psd_models=(), per_power_variance=False,
+                               power_exposures=())
+    summary = demo_mod.demo(tmp_path, quiet=True, config=tiny)
+    assert summary["posterior"] == "posterior: not available in this version"
+    assert "posterior: not available in this version" in (tmp_path / "report.md").read_text()
+
+
+def test_simulate_calibrate_round_trip(tmp_path, capsys):
+    out = tmp_path / "sim"
+    rc = main(["simulate", "--k", "0.02", "0.04", "--radius", "1.53", "--exposure-ms", "0.5",
+               "--fps", "1500", "--frames", "8192", "--tracking-nm", "2", "--power-mw", "200",
+               "400", "--seed", "1", "--out", str(out), "--json"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    info = json.loads(cap.out)
+    manifest = out / "manifest.json"
+    assert info["manifest"] == str(manifest) and info["n_recordings"] == 2
+    doc = json.loads(manifest.read_text())
+    assert [r["laser_power_mW"] for r in doc["recordings"]] == [200, 400]
+    assert doc["recordings"][0]["exposure_s"] == pytest.approx(5e-4)
+    assert all((out / r["file"]).exists() for r in doc["recordings"])
+
+    gamma = 6 * math.pi * 0.00095 * 1.53e-6
+    d_um2 = KT / gamma * 1e12
+    # blur-corrected equipartition with the known D: readable table in lab units
+    rc = main(["calibrate", str(manifest), "--method", "equipartition",
+               "--diffusion", f"{d_um2:.8g}"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert "pN/nm" in cap.out and "um^2/s" in cap.out and "method: equipartition" in cap.out
+    # ... and as JSON (SI units)
+    rc = main(["calibrate", str(manifest), "--method", "equipartition",
+               "--diffusion", f"{d_um2:.8g}", "--json"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    res = json.loads(cap.out)
+    assert res["units"] == "SI"
+    assert res["k"] == pytest.approx([2e-5, 4e-5], rel=0.1)
+    # naive equipartition is biased high by the blur
+    rc = main(["calibrate", str(manifest), "--method", "equipartition", "--json"])
+    naive = json.loads(capsys.readouterr().out)["k"]
+    assert naive[1] > res["k"][1] * 1.05
+
+
+def test_format_result_lab_units():
+    """The calibrate table converts every parameter to lab units (c: N/m/W -> pN/nm/W)."""
+    import numpy as np
+
+    from blurtrap.cli import format_result
+    from blurtrap.inference import CalibrationResult
+
+    res = CalibrationResult(
+        method="variance_vs_power", model="standard", param_names=("c", "gamma", "tracking_var"),
+        values=np.array([1e-4, 2.74e-8, 4e-18]), covariance=np.diag([1e-12, 1e-18, 1e-36]),
+        temperature=295.0, k_per_recording=np.array([1e-5, 2e-5]),
+        k_per_recording_err=np.array([1e-7, 2e-7]), gof={}, n_recordings=2, n_frames=100)
+    table = format_result(res)
+    rows = {ln.split()[0]: ln.split() for ln in table.splitlines()[2:]}
+    assert float(rows["c"][1]) == pytest.approx(0.1) and rows["c"][-1] == "pN/nm/W"
+    assert float(rows["gamma"][1]) == pytest.approx(0.0274)
+    assert " ".join(rows["gamma"][-2:]) == "pN s/um"
+    assert float(rows["tracking_var"][1]) == pytest.approx(4.0)
+    assert "um^2/s" in table and "k (recording 1)" in table
+    d = next(ln for ln in table.splitlines() if ln.strip().startswith("D = kT/gamma"))
+    assert float(d.split()[3]) == pytest.approx(KT / 2.74e-8 * 1e12, rel=1e-5)
+
+
+def _one_error_line(err, command):
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"blurtrap {command}: error: ")
+    return lines[0]
+
+
+def test_errors_are_one_line(tmp_path, capsys):
+    assert main(["calibrate", str(tmp_path / "missing.json")]) == 1
+    line = _one_error_line(capsys.readouterr().err, "calibrate")
+    assert "missing.json" in line
+
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert main(["calibrate", str(bad)]) == 1
+    _one_error_line(capsys.readouterr().err, "calibrate")
+
+    # exposure longer than the frame interval
+    assert main(["simulate", "--k", "0.02", "--gamma", "0.0274", "--exposure-ms", "2",
+                 "--fps", "1500", "--out", str(tmp_path / "x")]) == 1
+    line = _one_error_line(capsys.readouterr().err, "simulate")
+    assert "frame interval" in line
+
+    # usage errors: one line too (argparse, exit 2)
+    assert main(["simulate", "--k", "0.02"]) == 2
+    _one_error_line(capsys.readouterr().err, "simulate")
+    assert main(["calibrate", "m.json", "--method", "nonsense"]) == 2
+    _one_error_line(capsys.readouterr().err, "calibrate")
+
+
+def test_debug_shows_traceback(tmp_path):
+    with pytest.raises(Exception, match="no such file"):
+        main(["--debug", "calibrate", str(tmp_path / "missing.json")])
+    with pytest.raises(Exception, match="no such file"):
+        main(["calibrate", str(tmp_path / "missing.json"), "--debug"])
