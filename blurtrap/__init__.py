@@ -45,6 +45,13 @@ from .inference import (
     TrapModel as TrapModel,
     calibrate as calibrate,
     calibrate_batch as calibrate_batch,
+    LogUniform as LogUniform,
+    Normal as Normal,
+    Posterior as Posterior,
+    ShortChainWarning as ShortChainWarning,
+    sample_posterior as sample_posterior,
+    stokes_gamma_prior as stokes_gamma_prior,
+    stuck_bead_prior as stuck_bead_prior,
 )
 from .simulate import (
     ExponentialProfile as ExponentialProfile,

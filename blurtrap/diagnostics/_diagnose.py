@@ -252,8 +252,12 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         dof = len(params) - len(base.param_names)
         dll = float(nll0 - nll1)
         lr = max(2.0 * dll, 0.0)
-        p = float(chi2_sf(lr, max(dof, 1))) if dof > 0 else float("nan")
-        if dof == 1:
+        # Flag effects (motion_blur, aliasing) add no free parameter: they fix the strength
+        # of a nested family (e.g. W_eff = beta W at beta = 1), whose free-beta likelihood is
+        # at least as high, so referring the LR to the 1-parameter law is conservative.
+        dof_test = max(dof, 1)
+        p = float(chi2_sf(lr, dof_test))
+        if dof_test == 1:
             p = 0.5 * p  # null on the boundary (parameter = 0): 1/2 chi2_0 + 1/2 chi2_1
         ev = _evidence(name, base, recs)
         if p_line is not None:

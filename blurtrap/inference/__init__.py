@@ -17,3 +17,16 @@ from ._variance import (
     highpass_variance_curve as highpass_variance_curve,
 )
 from ._batch import BatchCalibration as BatchCalibration, calibrate_batch as calibrate_batch
+from ._posterior import Posterior as Posterior, ShortChainWarning as ShortChainWarning
+from ._posterior import sample_posterior as sample_posterior
+from ._priors import (
+    DEFAULT_BOUNDS as DEFAULT_BOUNDS,
+    InverseGamma as InverseGamma,
+    LogNormal as LogNormal,
+    LogUniform as LogUniform,
+    Normal as Normal,
+    Prior as Prior,
+    stokes_gamma as stokes_gamma,
+    stokes_gamma_prior as stokes_gamma_prior,
+    stuck_bead_prior as stuck_bead_prior,
+)
