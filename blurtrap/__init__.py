@@ -7,7 +7,11 @@ imported lazily: ``import blurtrap`` imports neither.
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from ._config import enable_x64 as enable_x64, x64_enabled as x64_enabled
+from ._config import (
+    enable_compilation_cache as enable_compilation_cache,
+    enable_x64 as enable_x64,
+    x64_enabled as x64_enabled,
+)
 from .physics import (
     BOLTZMANN as BOLTZMANN,
     ExponentialKernel as ExponentialKernel,

@@ -55,3 +55,18 @@ def warn_if_float32(name: str, x) -> None:
             Float32DataWarning,
             stacklevel=3,
         )
+
+
+def enable_compilation_cache(path: str | None = None) -> str:
+    """Keep compiled XLA programs on disk (``jax_compilation_cache_dir``) so that a second
+    run of the same calibration skips compilation. Default folder:
+    ``$BLURTRAP_CACHE_DIR`` or ``~/.cache/blurtrap/jax``. Returns the folder used."""
+    import os
+
+    path = path or os.environ.get("BLURTRAP_CACHE_DIR") or os.path.join(
+        os.path.expanduser("~"), ".cache", "blurtrap", "jax"
+    )
+    os.makedirs(path, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return path

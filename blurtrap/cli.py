@@ -119,9 +119,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frequency range fitted by the spectral methods [Hz]")
     c.add_argument("--diffusion", type=float, default=None, metavar="UM2_PER_S",
                    help="known D [um^2/s] for blur-corrected --method equipartition")
+    c.add_argument("--posterior", action="store_true",
+                   help="also sample the posterior with emcee (medians, 68 %%/95 %% intervals)")
+    c.add_argument("--steps", type=int, default=2000, metavar="N",
+                   help="emcee steps for --posterior (default 2000)")
+    c.add_argument("--walkers", type=int, default=32, metavar="N",
+                   help="emcee walkers for --posterior (default 32)")
     c.add_argument("--json", action="store_true",
                    help="print the result as one JSON object (SI units, to_dict())")
     _add_debug(c)
+
+    g = sub.add_parser(
+        "diagnose", help="goodness of fit and ranked missing effects",
+        description="Fit the model, test whether it describes the data, and rank the "
+        "physical effects that may be missing (canonical effect names), with the evidence.")
+    g.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
+    g.add_argument("--model", choices=("naive", "blur", "standard"), default="standard",
+                   help="starting model (default standard)")
+    g.add_argument("--add", nargs="+", default=(), metavar="EFFECT",
+                   help="effects added to the model before diagnosing (canonical names)")
+    g.add_argument("--alpha", type=float, default=0.05,
+                   help="family-wise false-alarm rate (default 0.05)")
+    g.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_debug(g)
     return p
 
 
@@ -271,11 +291,44 @@ def _calibrate(args) -> int:
             raise CliError("--diffusion applies to --method equipartition only")
         kw["diffusion"] = args.diffusion * 1e-12
     result = calibrate(str(path), **kw)
+    post = None
+    if args.posterior:
+        from .inference import sample_posterior
+
+        if not args.json:
+            print("sampling the posterior (emcee)...", file=sys.stderr)
+        post = sample_posterior(str(path), model=args.model, n_steps=args.steps,
+                                n_walkers=args.walkers, k=kw.get("k"),
+                                progress=not args.json and sys.stderr.isatty())
     if args.json:
-        print(json.dumps(result.to_dict()))
+        out = result.to_dict()
+        if post is not None:
+            out["posterior"] = post.to_dict()
+        print(json.dumps(out))
     else:
         print(format_result(result))
+        if post is not None:
+            print(post.summary())
     return 0
+
+
+def _diagnose(args) -> int:
+    from pathlib import Path
+
+    from .diagnostics import diagnose
+
+    path = Path(args.manifest)
+    if not path.exists():
+        raise CliError(f"{path}: no such file")
+    d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
+    if args.json:
+        out = d.to_dict()
+        out["gof"] = {k: out["gof"][k] for k in ("statistic", "dof", "p_value")}
+        out["gof"]["p"] = out["gof"]["p_value"]
+        print(json.dumps(out, default=float))
+    else:
+        print(d.summary())
+    return 0  # a diagnosis was made; adequacy is in the output
 
 
 # ------------------------------------------------------------------------------------------
@@ -285,9 +338,16 @@ def main(argv=None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a usage error (2), already printed
         return int(exc.code) if isinstance(exc.code, int) else 1
-    from . import enable_x64
+    import os
+
+    from . import enable_compilation_cache, enable_x64
 
     enable_x64()
+    if not os.environ.get("BLURTRAP_NO_CACHE"):
+        try:  # compiled programs on disk: the second run of a command skips compilation
+            enable_compilation_cache()
+        except OSError:  # pragma: no cover - read-only home: run without the cache
+            pass
     debug = getattr(args, "debug", False)
     try:
         if args.command == "demo":
@@ -298,6 +358,8 @@ def main(argv=None) -> int:
             return _simulate(args)
         if args.command == "calibrate":
             return _calibrate(args)
+        if args.command == "diagnose":
+            return _diagnose(args)
         raise CliError(f"unknown command {args.command!r}")  # pragma: no cover
     except BrokenPipeError:  # output piped into e.g. `head`: not an error
         import os

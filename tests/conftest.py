@@ -9,6 +9,11 @@ import pytest  # noqa: E402
 import blurtrap  # noqa: E402
 
 blurtrap.enable_x64()
+# share compiled programs between the xdist workers (and between runs on one machine)
+blurtrap.enable_compilation_cache(
+    os.environ.get("BLURTRAP_TEST_CACHE_DIR",
+                   os.path.join(os.path.dirname(__file__), "..", ".pytest_cache", "jax"))
+)
 
 
 @pytest.fixture

@@ -22,12 +22,13 @@ def test_help_subprocess():
     env = dict(os.environ, MPLBACKEND="Agg")
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
-    for command in ("demo", "simulate", "calibrate"):
+    for command in ("demo", "simulate", "calibrate", "diagnose"):
         assert command in out.stdout
 
 
 @pytest.mark.parametrize("command, flag", [("demo", "--quick"), ("simulate", "--exposure-ms"),
-                                           ("calibrate", "--method")])
+                                           ("calibrate", "--method"), ("diagnose", "--add"),
+                                           ("calibrate", "--posterior")])
 def test_every_command_has_help(command, flag, capsys):
     assert main([command, "--help"]) == 0
     assert flag in capsys.readouterr().out
@@ -206,3 +207,28 @@ def test_debug_shows_traceback(tmp_path):
         main(["--debug", "calibrate", str(tmp_path / "missing.json")])
     with pytest.raises(Exception, match="no such file"):
         main(["calibrate", str(tmp_path / "missing.json"), "--debug"])
+
+
+def test_diagnose_and_posterior_from_the_cli(tmp_path, capsys):
+    out = tmp_path / "sim"
+    assert main(["simulate", "--k", "0.01", "--radius", "1.53", "--exposure-ms", "0.6667",
+                 "--fps", "1500", "--frames", "8192", "--tracking-nm", "2", "--seed", "3",
+                 "--out", str(out), "--json"]) == 0
+    capsys.readouterr()
+    manifest = str(out / "manifest.json")
+    assert main(["diagnose", manifest, "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert isinstance(d["adequate"], bool)
+    assert set(d["gof"]) >= {"statistic", "dof", "p"}
+    for item in d["ranking"]:
+        assert set(item) >= {"effect", "delta_loglik", "p_value", "delta_aic", "evidence"}
+    assert main(["diagnose", manifest, "--model", "naive"]) == 0
+    text = capsys.readouterr().out
+    assert "NOT adequate" in text
+    assert main(["diagnose", manifest, "--add", "nonsense"]) == 1
+    assert "unknown effect 'nonsense'" in capsys.readouterr().err
+    assert main(["calibrate", manifest, "--posterior", "--steps", "150", "--walkers", "12",
+                 "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["posterior"]["method"] == "posterior"
+    assert res["posterior"]["k"] == pytest.approx(res["k"], rel=0.1)

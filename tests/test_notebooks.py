@@ -10,7 +10,8 @@ NAMES = [p.name for p in NOTEBOOKS]
 
 
 def test_notebooks_present():
-    assert {"01_quickstart.ipynb", "02_reproduce_paper.ipynb", "05_sweep.ipynb"} <= set(NAMES)
+    assert {"01_quickstart.ipynb", "02_reproduce_paper.ipynb", "03_find_missing_effect.ipynb",
+            "04_uncertainty.ipynb", "05_sweep.ipynb"} <= set(NAMES)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=NAMES)

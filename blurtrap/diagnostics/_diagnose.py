@@ -32,6 +32,10 @@ RELATION_CANDIDATES = ("power_offset", "laser_heating")
 
 @dataclasses.dataclass(frozen=True)
 class Candidate:
+    """A candidate missing effect. ``delta_loglik`` = log-likelihood gain when it is added,
+    ``delta_aic`` = AIC(model) - AIC(model + effect): positive means the effect improves the
+    fit after paying for its parameters."""
+
     effect: str
     delta_loglik: float | None
     dof: int
@@ -223,7 +227,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     for name in candidates:
         if name == "anharmonicity":
             z, p = _kurtosis_test(recs, base)
-            out.append(Candidate(name, 0.5 * z * z, 1, p, 2.0 - z * z,
+            out.append(Candidate(name, 0.5 * z * z, 1, p, z * z - 2.0,
                                  f"frame-histogram excess kurtosis {z:+.2f} standard errors "
                                  "from Gaussian"))
             continue
@@ -268,13 +272,14 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         if not ok:
             ev += " (refit did not converge)"
         ev += f"; adding it: gof p {base.gof['p_value']:.2g} -> {gof1['p_value']:.2g}"
-        out.append(Candidate(name, dll, dof, p, 2.0 * dof - 2.0 * dll, ev))
+        out.append(Candidate(name, dll, dof, p, 2.0 * dll - 2.0 * dof, ev))
     ranked = []
     for c in out:
-        sig = bool(c.p_value < threshold) and (c.delta_aic is None or c.delta_aic < 0)
+        sig = bool(c.p_value < threshold) and (c.delta_aic is None or c.delta_aic > 0)
         ranked.append(dataclasses.replace(c, significant=sig))
     ranked.sort(key=lambda c: (not c.significant,
-                               c.delta_aic if c.delta_aic is not None else -1e300 * c.significant,
+                               -(c.delta_aic if c.delta_aic is not None else
+                                 (1e300 if c.significant else -1e300)),
                                c.p_value))
     if ranked and ranked[0].significant:  # full fit (with errors) of the best candidate
         top = ranked[0]
@@ -302,13 +307,14 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
 
 
 def compare(fit_a: CalibrationResult, fit_b: CalibrationResult) -> dict:
-    """Compare two fits of the same data (same method): goodness of fit, AIC and the shift
-    of each shared parameter in units of fit_a's standard error."""
+    """Compare two fits of the same data (same method): goodness of fit, the log-likelihood
+    gain and ``delta_aic = AIC(a) - AIC(b)`` (> 0: b is better), and the shift of each shared
+    parameter in units of fit_a's standard error."""
     out = {"gof_a": dict(fit_a.gof), "gof_b": dict(fit_b.gof)}
     if "nll" in fit_a.extras and "nll" in fit_b.extras:
         dll = float(fit_a.extras["nll"] - fit_b.extras["nll"])
         ddof = len(fit_b.param_names) - len(fit_a.param_names)
-        out.update(delta_loglik=dll, delta_aic=2.0 * ddof - 2.0 * dll)
+        out.update(delta_loglik=dll, delta_aic=2.0 * dll - 2.0 * ddof)
     shifts = {}
     for name in fit_a.param_names:
         if name in fit_b.param_names:
