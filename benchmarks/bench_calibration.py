@@ -32,10 +32,9 @@ import textwrap
 import time
 import warnings
 
-import numpy as np
-
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 import blurtrap as bt
 from blurtrap.physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
@@ -221,8 +220,7 @@ def main(argv=None):
     from blurtrap.inference import _calibrate as cal
     from blurtrap.inference._fit import fit_ml
     from blurtrap.inference._models import get_model
-    from blurtrap.inference._problems import (exact_nll, make_exact_args, make_layout,
-                                              spectral_nll)
+    from blurtrap.inference._problems import exact_nll, make_exact_args, make_layout, spectral_nll
     r0 = recs64[0]
     mdl = get_model(None)
     lay = make_layout([r0], "shared", True)

@@ -26,10 +26,9 @@ import sys
 import time
 import warnings
 
-import numpy as np
-
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 import blurtrap as bt
 from blurtrap.physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE

@@ -2,7 +2,13 @@
 
 from ._diagnose import (
     Candidate as Candidate,
+)
+from ._diagnose import (
     Diagnosis as Diagnosis,
+)
+from ._diagnose import (
     compare as compare,
+)
+from ._diagnose import (
     diagnose as diagnose,
 )

@@ -10,7 +10,7 @@ a finite, meaningful standard error.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import equinox as eqx
 import jax

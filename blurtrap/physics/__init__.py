@@ -5,24 +5,51 @@ Imports nothing else of blurtrap. SI units throughout.
 
 from ._blur import (
     blur_factor as blur_factor,
+)
+from ._blur import (
     blur_factor_pade as blur_factor_pade,
+)
+from ._blur import (
     measured_variance as measured_variance,
+)
+from ._blur import (
     stiffness_from_variance as stiffness_from_variance,
 )
-from ._constants import BOLTZMANN as BOLTZMANN, DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE
+from ._constants import BOLTZMANN as BOLTZMANN
+from ._constants import DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE
 from ._kernels import (
     AbstractKernel as AbstractKernel,
+)
+from ._kernels import (
     ExponentialKernel as ExponentialKernel,
+)
+from ._kernels import (
     ProductKernel as ProductKernel,
+)
+from ._kernels import (
     RectKernel as RectKernel,
+)
+from ._kernels import (
     TrapezoidKernel as TrapezoidKernel,
+)
+from ._kernels import (
     psd_folded as psd_folded,
+)
+from ._kernels import (
     variance_general as variance_general,
 )
 from ._spectra import (
     frame_autocovariance as frame_autocovariance,
+)
+from ._spectra import (
     lorentzian as lorentzian,
+)
+from ._spectra import (
     psd_measured as psd_measured,
+)
+from ._spectra import (
     sample_variance_se as sample_variance_se,
+)
+from ._spectra import (
     transfer_rect as transfer_rect,
 )

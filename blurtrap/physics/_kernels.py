@@ -26,7 +26,7 @@ class AbstractKernel(eqx.Module):
     """A normalised detection kernel, described by its power transfer ``|H(f)|^2``."""
 
     @abc.abstractmethod
-    def transfer(self, f: ArrayLike) -> Float[Array, "..."]:
+    def transfer(self, f: ArrayLike) -> Float[Array, ...]:
         """``|H(f)|^2`` (dimensionless, 1 at f = 0)."""
 
     @abc.abstractmethod

@@ -12,7 +12,6 @@ pytree passed through ``simulate(..., force_params=...)``, `F` the total conserv
 from __future__ import annotations
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 

@@ -225,8 +225,8 @@ def simulate(
     - `key`: JAX PRNG key (keyword-only, required). A single key gives every grid point the
       same underlying random numbers (common random numbers: a grid call equals the individual
       calls with that key, except that loop lengths are static and shared by the grid: euler's
-      dead-time substep count and ``substeps=None`` follow the most demanding grid point); an array of keys broadcastable to ``G`` gives each grid point its
-      own stream.
+      dead-time substep count and ``substeps=None`` follow the most demanding grid point);
+      an array of keys broadcastable to ``G`` gives each grid point its own stream.
     - `temperature`: T [K] (> 0).
     - `n_traces`: independent trajectories per grid point (int >= 1).
     - `method`: ``"exact"``, ``"euler"`` or ``"exact_frames"``.

@@ -6,11 +6,9 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from blurtrap.physics import frame_autocovariance, measured_variance
+from blurtrap.physics import BOLTZMANN, frame_autocovariance, measured_variance
 from blurtrap.physics._spectra import _sample_variance_var
 from blurtrap.simulate import ExposureWindows, SubstepBiasWarning, simulate
-
-from blurtrap.physics import BOLTZMANN
 
 T = 295.0
 # (label, bead radius [m], k [N/m], tau [s]); gamma = k tau = 6 pi eta r with eta ~ 0.00089 Pa s
