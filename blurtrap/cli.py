@@ -12,21 +12,13 @@ import json
 import math
 import sys
 
+from .inference._result import LAB
+
 _METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
             "equipartition")
 _MODELS = ("standard", "blur", "naive", "naive_aliased")
 _K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 
-# name: (factor from SI, lab unit); the lab table printed by `calibrate`
-_LAB = {
-    "k": (1e3, "pN/nm"),
-    "c": (1e3, "pN/nm/W"),
-    "gamma": (1e6, "pN s/um"),
-    "tracking_var": (1e18, "nm^2"),
-    "diffusion": (1e12, "um^2/s"),
-    "tau": (1e3, "ms"),
-    "corner_frequency": (1.0, "Hz"),
-}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -230,11 +222,11 @@ def format_result(result) -> str:
     rows = []
     for name, v, e in zip(result.param_names, result.values, result.errors, strict=True):
         base = name.split("[")[0]
-        fac, unit = _LAB.get(base, (1.0, "SI"))
+        fac, unit = LAB.get(base, (1.0, "SI"))
         rows.append((name, v * fac, e * fac, unit))
     g = result.gamma
     if math.isfinite(g):
-        fac, unit = _LAB["diffusion"]
+        fac, unit = LAB["diffusion"]
         rows.append(("D = kT/gamma", result.diffusion * fac, result.diffusion_err * fac, unit))
         k = result.k
         if "c" not in result.param_names:

@@ -28,6 +28,7 @@ from ..inference._result import CalibrationResult, FitError
 SPECTRAL_CANDIDATES = ("motion_blur", "aliasing", "tracking_noise", "drift", "line_noise",
                        "exposure_kernel", "detector_filter", "hydrodynamics")
 RELATION_CANDIDATES = ("power_offset", "laser_heating")
+_CORE_FLAGS = ("motion_blur", "aliasing", "tracking_noise")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -250,6 +251,12 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         try:
             test_model = mdl.add(name, **config)
             params, nll1, gof1, ok = screen_model(recs, test_model, k, start=base.params)
+            if name in _CORE_FLAGS:
+                # adding a core effect can move k and gamma far from the misspecified base
+                # fit: also try the closed-form start and keep the better optimum
+                cold = screen_model(recs, test_model, k, start=None)
+                if cold[1] < nll1:
+                    params, nll1, gof1, ok = cold
         except (FitError, ValueError) as exc:
             out.append(Candidate(name, None, 0, 1.0, None, f"refit failed: {exc}"))
             continue
@@ -289,8 +296,9 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
             T = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
             cfg = {"frequency": f0, "width": 1.0 / T}
         try:
+            start = None if top.effect in _CORE_FLAGS else base.params
             best_fit = calibrate(recs, method="likelihood", likelihood="whittle",
-                                 model=mdl.add(top.effect, **cfg), k=k, start=base.params)
+                                 model=mdl.add(top.effect, **cfg), k=k, start=start)
             ranked[0] = dataclasses.replace(top, fit=best_fit)
         except (FitError, ValueError) as exc:
             notes.append(f"full refit with {top.effect} failed: {exc}")

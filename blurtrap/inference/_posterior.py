@@ -39,7 +39,7 @@ from ._calibrate import _default_k_mode, _spectral_args, as_recordings, calibrat
 from ._models import get_model
 from ._priors import DEFAULT_BOUNDS, LogUniform, Prior
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
-from ._result import CalibrationResult
+from ._result import LAB, CalibrationResult
 
 
 class ShortChainWarning(UserWarning):
@@ -48,16 +48,7 @@ class ShortChainWarning(UserWarning):
 
 
 # lab units for summaries: name -> (factor from SI, unit)
-LAB_UNITS = {
-    "k": (1e3, "pN/nm"),
-    "c": (1e3, "pN/nm/W"),
-    "gamma": (1e6, "pN s/um"),
-    "tracking_var": (1e18, "nm^2"),
-    "diffusion": (1e12, "um^2/s"),
-    "tau": (1e3, "ms"),
-    "corner_frequency": (1.0, "Hz"),
-    "force_per_nm": (1e12, "pN"),
-}
+LAB_UNITS = LAB
 
 _TRACE_COUNT = [0]  # incremented each time the batched log-posterior is traced
 

@@ -10,7 +10,8 @@ import numpy as np
 
 from ..physics._constants import BOLTZMANN
 
-LAB = {  # name: (factor from SI, lab unit)
+# The one table of lab units (reports, plots, CLI): name -> (factor from SI, lab unit)
+LAB = {
     "k": (1e3, "pN/nm"),
     "c": (1e3, "pN/nm/W"),
     "gamma": (1e6, "pN s/um"),
@@ -18,6 +19,19 @@ LAB = {  # name: (factor from SI, lab unit)
     "tracking_var": (1e18, "nm^2"),
     "tau": (1e3, "ms"),
     "corner_frequency": (1.0, "Hz"),
+    "force_per_nm": (1e12, "pN"),
+    "drift_diffusion": (1e18, "nm^2/s"),
+    "line_amplitude": (1e9, "nm"),
+    "hydro_radius": (1e6, "um"),
+    "power_offset": (1e3, "mW"),
+    "heating": (1.0, "K/W"),
+    "f3db": (1.0, "Hz"),
+    "rise_fraction": (1.0, ""),
+    "diode_alpha": (1.0, ""),
+    "exposure": (1e3, "ms"),
+    "frame_interval": (1e3, "ms"),
+    "position": (1e9, "nm"),
+    "laser_power": (1e3, "mW"),
 }
 
 

@@ -11,22 +11,15 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..inference._result import LAB
 from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 # name -> (factor from SI, lab unit, pretty label); `c` is k per laser power
-LAB_UNITS = {
-    "k": (1e3, "pN/nm", "k"),
-    "c": (1e3, "pN/nm/W", "c = k/P"),
-    "gamma": (1e6, "pN s/um", "gamma"),
-    "diffusion": (1e12, "um^2/s", "D"),
-    "tracking_var": (1e18, "nm^2", "eps^2"),
-    "tau": (1e3, "ms", "tau"),
-    "corner_frequency": (1.0, "Hz", "f_c"),
-    "exposure": (1e3, "ms", "W"),
-    "frame_interval": (1e3, "ms", "dt"),
-    "position": (1e9, "nm", "x"),
-    "laser_power": (1e3, "mW", "P"),
-}
+_SYMBOLS = {"k": "k", "c": "c = k/P", "gamma": "gamma", "diffusion": "D",
+            "tracking_var": "eps^2", "tau": "tau", "corner_frequency": "f_c", "exposure": "W",
+            "frame_interval": "dt", "position": "x", "laser_power": "P"}
+# (factor from SI, lab unit, symbol), from the package's one table of lab units
+LAB_UNITS = {name: (*LAB[name], sym) for name, sym in _SYMBOLS.items()}
 
 NM = 1e9
 NM2 = 1e18
@@ -133,11 +126,16 @@ def model_psd(params, recording, f, model=None, index: int = 0):
 
     k, g, e2, t = trap_params(params, index)
     mdl = get_model(model or model_name(params))
+    extras = {}
+    if is_result(params):  # effect parameters (drift_diffusion, line_amplitude, ...)
+        extras = {p.name: params.params[p.name] for p in mdl.extra_params
+                  if p.name in params.params}
     with jax.enable_x64(True):
         f2 = jnp.asarray(np.asarray(f, dtype=float)[None, :])
         one = lambda v: jnp.asarray([float(v)])  # noqa: E731
         p = mdl.psd(f2, one(k), one(g), jnp.asarray(e2), one(recording.frame_interval),
-                    one(recording.exposure), one(t))
+                    one(recording.exposure), one(t),
+                    extras={n: jnp.asarray(v) for n, v in extras.items()})
         return np.asarray(p, dtype=float)[0]
 
 
