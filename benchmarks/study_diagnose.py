@@ -1,0 +1,336 @@
+"""Statistical behaviour of ``blurtrap.diagnose``: false-alarm rate, identification rate per
+hidden effect (strong and weak), and runtime per call.
+
+Run:  python benchmarks/study_diagnose.py [--seeds 40] [--effect-seeds 10] [--quick]
+                                          [--only control,drift,...] [--out DIR]
+
+All single-recording scenarios share one record length (N = 16384 frames, dt = W = 1/1500 s,
+k = 1e-5 N/m, gamma = 6 pi 0.00093 Pa s 1.53 um, eps = 2 nm) so compiled programs are reused,
+exactly as in tests/diagnostics/test_hidden_effects.py.
+
+Per scenario and seed it records: adequate, the first-ranked candidate (and whether it is
+significant), the p-value of the base gof, and -- for hidden-effect scenarios -- whether the
+full refit with the first-ranked effect (``d.ranking[0].fit``) passes gof (p > threshold)
+and has k, gamma within 3 SE of the truth. Results go to ``diagnose_study.json`` (per-seed
+rows) and a markdown summary on stdout.
+
+Seeds: control seeds are 1000 + i, effect scenarios 2000 + 100 * scenario_index + i (the
+multi-power scenarios simulate their 4 recordings with keys 10 * seed + 0..3). Every row
+stores its seed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import pathlib
+import platform
+import sys
+import time
+
+import jax
+import numpy as np
+
+import blurtrap as bt
+
+GAMMA = 6 * math.pi * 0.00093 * 1.53e-6
+DT = 1 / 1500
+K = 1e-5
+N = 16384
+EPS = 2e-9
+NO_BLUR = bt.TrapModel(blur=False, alias=True, noise=True, name="aliased+noise")
+
+
+def record(seed, injections=(), eps=EPS, k=K, gamma=GAMMA, temperature=295.0, power=None,
+           meta_temperature=295.0):
+    x = np.asarray(bt.simulate(k, gamma, DT, DT, N, key=jax.random.key(seed),
+                               method="exact_frames", tracking_std=eps, injections=injections,
+                               temperature=temperature))[0]
+    return bt.Recording(x, frame_interval=DT, exposure=DT, laser_power=power,
+                        temperature=meta_temperature)
+
+
+def within(fit, n_se=3.0, k=K, gamma=GAMMA):
+    return bool(abs(fit.k - k) < n_se * fit.k_err and abs(fit.gamma - gamma) < n_se * fit.gamma_err)
+
+
+# ---------------------------------------------------------------------------------------
+# scenarios: name -> (expected effect or None, builder(seed) -> (data, model, truth))
+# ---------------------------------------------------------------------------------------
+def power_offset_recs(seed, p0=0.05):
+    c = 5e-5
+    return [record(seed * 10 + i, k=c * (p - p0), power=p)
+            for i, p in enumerate([0.1, 0.2, 0.3, 0.4])]
+
+
+def laser_heating_recs(seed, b=25.0):
+    from blurtrap.physics._effects import water_viscosity
+
+    c, t0 = 3e-5, 295.0
+    recs = []
+    for i, p in enumerate([0.1, 0.4, 0.7, 1.0]):
+        t = t0 + b * p
+        g = GAMMA * float(water_viscosity(t) / water_viscosity(t0))
+        recs.append(record(seed * 10 + i, k=c * p, gamma=g, temperature=t, power=p))
+    return recs
+
+
+SCENARIOS = {
+    # name: (hidden effect, builder, model, truth-check kind, parameter label)
+    "control": (None, lambda s: record(s), None, "single", "nothing hidden"),
+    "drift": ("drift", lambda s: record(s, injections=(bt.RandomWalkDrift(2e-16),)), None,
+              "single", "D_d = 2e-16 m^2/s"),
+    "drift_weak": ("drift", lambda s: record(s, injections=(bt.RandomWalkDrift(2e-18),)),
+                   None, "single", "D_d = 2e-18 m^2/s"),
+    "tracking_noise": ("tracking_noise", lambda s: record(s, eps=8e-9), "blur", "single",
+                       "eps = 8 nm, model blur"),
+    "tracking_noise_weak": ("tracking_noise", lambda s: record(s, eps=4e-9), "blur", "single",
+                            "eps = 4 nm, model blur"),
+    "motion_blur": ("motion_blur", lambda s: record(s), NO_BLUR, "single",
+                    "W = dt, model aliased+noise"),
+    "line_noise": ("line_noise",
+                   lambda s: record(s, injections=(bt.SinusoidDrift(20e-9, 1 / 50.0),)), None,
+                   "single", "A = 20 nm at 50 Hz"),
+    "line_noise_weak": ("line_noise",
+                        lambda s: record(s, injections=(bt.SinusoidDrift(5e-9, 1 / 50.0),)),
+                        None, "single", "A = 5 nm at 50 Hz"),
+    "power_offset": ("power_offset", lambda s: power_offset_recs(s), None, "power_offset",
+                     "4 powers 0.1-0.4 W, P0 = 50 mW"),
+    "power_offset_weak": ("power_offset", lambda s: power_offset_recs(s, p0=0.01), None,
+                          "power_offset", "4 powers 0.1-0.4 W, P0 = 10 mW"),
+    "laser_heating": ("laser_heating", lambda s: laser_heating_recs(s), None, "heating",
+                      "4 powers 0.1-1 W, b = 25 K/W"),
+    "laser_heating_weak": ("laser_heating", lambda s: laser_heating_recs(s, b=10.0), None,
+                           "heating", "4 powers 0.1-1 W, b = 10 K/W"),
+}
+SEED_BASE = {name: (1000 if name == "control" else 2000 + 100 * i)
+             for i, name in enumerate(SCENARIOS)}
+TRUTH = {"power_offset": 0.05, "power_offset_weak": 0.01, "laser_heating": 25.0,
+         "laser_heating_weak": 10.0}
+
+
+def fixed_ok(name, kind, fit):
+    """(gof, truth) checks of the full refit with the first-ranked effect."""
+    if fit is None:
+        return None
+    if kind == "single":
+        return within(fit)
+    if kind == "power_offset":
+        i = fit.param_names.index("power_offset") if "power_offset" in fit.param_names else None
+        if i is None:
+            return False
+        return bool(abs(fit.values[i] - TRUTH[name]) < 3 * fit.errors[i]
+                    and abs(fit.gamma - GAMMA) < 3 * fit.gamma_err)
+    if kind == "heating":
+        i = fit.param_names.index("heating") if "heating" in fit.param_names else None
+        if i is None:
+            return False
+        return bool(abs(fit.values[i] - TRUTH[name]) < 3 * fit.errors[i])
+    return None
+
+
+def run_one(name, seed):
+    effect, build, model, kind, _ = SCENARIOS[name]
+    data = build(seed)
+    t0 = time.perf_counter()
+    d = bt.diagnose(data, model=model)
+    wall = time.perf_counter() - t0
+    top = d.ranking[0] if d.ranking else None
+    fit = top.fit if top is not None else None
+    row = {
+        "scenario": name, "seed": seed, "wall_s": wall, "adequate": bool(d.adequate),
+        "threshold": d.threshold, "gof_p": float(d.gof["p_value"]),
+        "top": top.effect if top else None, "top_significant": bool(top.significant) if top else False,
+        "top_p": float(top.p_value) if top else None,
+        "top_daic": (None if top is None or top.delta_aic is None else float(top.delta_aic)),
+        "significant": [c.effect for c in d.ranking if c.significant],
+        "base_within": within(d.fit) if kind == "single" else None,
+        "notes": list(d.notes),
+    }
+    if effect is not None:
+        row["identified"] = bool(top is not None and top.effect == effect and top.significant)
+        row["fixed_gof_p"] = None if fit is None else float(fit.gof["p_value"])
+        row["fixed_gof_ok"] = None if fit is None else bool(fit.gof["p_value"] > d.threshold)
+        row["fixed_truth_ok"] = fixed_ok(name, kind, fit) if row["identified"] else None
+        row["fixed_ok"] = bool(row["identified"] and row["fixed_gof_ok"] and row["fixed_truth_ok"])
+    return row, d
+
+
+def se(p, n):
+    return math.sqrt(max(p * (1 - p), 0.0) / n) if n else float("nan")
+
+
+def frac(rows, key):
+    n = len(rows)
+    x = sum(1 for r in rows if r.get(key))
+    p = x / n if n else float("nan")
+    return x, n, p, se(p, n)
+
+
+def fmt(x, n, p, s):
+    return f"{x}/{n} = {100 * p:.0f} % ± {100 * s:.0f} %"
+
+
+def machine_info():
+    import equinox
+    import jaxlib
+
+    cpu = platform.processor()
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:  # pragma: no cover
+        pass
+    return {"date": datetime.datetime.now().isoformat(timespec="seconds"), "cpu": cpu,
+            "cpu_count": os.cpu_count(), "platform": platform.platform(),
+            "python": sys.version.split()[0], "jax": jax.__version__,
+            "jaxlib": jaxlib.__version__, "numpy": np.__version__,
+            "equinox": equinox.__version__, "blurtrap": bt.__version__,
+            "device": str(jax.devices()[0]), "load_average_start": os.getloadavg()}
+
+
+def summarize(rows):
+    lines = []
+    errs = [r for r in rows if "error" in r]
+    rows = [r for r in rows if "error" not in r]
+    ctrl = [r for r in rows if r["scenario"] == "control"]
+    if ctrl:
+        x, n, p, s = frac([{"fa": not r["adequate"]} for r in ctrl], "fa")
+        lines.append("## False alarms (control, model standard)\n")
+        lines.append(f"flagged inadequate: {fmt(x, n, p, s)} (target <= 5 %)\n")
+        lines.append("| seed | gof p | threshold | cause (significant candidates) |")
+        lines.append("|---|---|---|---|")
+        for r in ctrl:
+            if not r["adequate"]:
+                cause = ", ".join(r["significant"]) or "goodness of fit only"
+                lines.append(f"| {r['seed']} | {r['gof_p']:.3g} | {r['threshold']:.3g} | "
+                             f"{cause} (top p = {r['top_p']:.3g}) |")
+        lines.append("")
+    lines.append("## Identification (hidden effect)\n")
+    lines.append("| scenario | size | n | (1) inadequate | (2) hidden effect ranked first "
+                 "(significant) | (3) refit gof ok & truth within 3 SE | all of (1)-(3) | "
+                 "top when wrong |")
+    lines.append("|---|---|---|---|---|---|---|---|")
+    for name, (effect, _, _, _, label) in SCENARIOS.items():
+        rs = [r for r in rows if r["scenario"] == name]
+        if effect is None or not rs:
+            continue
+        inad = frac([{"x": not r["adequate"]} for r in rs], "x")
+        ident = frac(rs, "identified")
+        fixed_rows = [r for r in rs if r["identified"]]
+        fx = frac([{"x": r["fixed_gof_ok"] and r["fixed_truth_ok"]} for r in fixed_rows], "x")
+        allok = frac(rs, "fixed_ok")
+        wrong = {}
+        for r in rs:
+            if not r["identified"]:
+                key = (r["top"] if r["top_significant"] else "none significant")
+                wrong[key] = wrong.get(key, 0) + 1
+        wtxt = ", ".join(f"{k}: {v}" for k, v in wrong.items()) or "-"
+        lines.append(f"| {name} | {label} | {len(rs)} | {fmt(*inad)} | {fmt(*ident)} | "
+                     f"{fmt(*fx)} (of identified) | {fmt(*allok)} | {wtxt} |")
+    lines.append("")
+    if errs:
+        lines.append("## diagnose() raised (not counted above)\n")
+        lines.extend(f"- {r['scenario']} seed {r['seed']}: {r['error']}" for r in errs)
+        lines.append("")
+    lines.append("## Runtime per diagnose call (this machine)\n")
+    lines.append("| scenario | n | median s | min s | max s |")
+    lines.append("|---|---|---|---|---|")
+    for name in SCENARIOS:
+        w = [r["wall_s"] for r in rows if r["scenario"] == name]
+        if w:
+            w2 = w[1:] if len(w) > 1 else w  # first call may include compilation
+            lines.append(f"| {name} | {len(w)} | {np.median(w2):.2f} | {min(w):.2f} | "
+                         f"{max(w):.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--seeds", type=int, default=40, help="control seeds (false alarms)")
+    ap.add_argument("--effect-seeds", type=int, default=10, help="seeds per strong effect")
+    ap.add_argument("--weak-seeds", type=int, default=None, help="seeds per weak effect "
+                    "(default: --effect-seeds)")
+    ap.add_argument("--power-seeds", type=int, default=None, help="seeds per multi-power "
+                    "scenario (default: --effect-seeds)")
+    ap.add_argument("--quick", action="store_true", help="4 control, 2 per effect seeds")
+    ap.add_argument("--only", default=None, help="comma-separated scenario names")
+    ap.add_argument("--budget-s", type=float, default=None,
+                    help="stop starting new scenarios after this many seconds")
+    ap.add_argument("--out", default="/tmp/diagnose_study", help="folder for diagnose_study.json")
+    ap.add_argument("--verbose", action="store_true")
+    ap.add_argument("--summarize", nargs="+", default=None,
+                    help="only print the summary of these diagnose_study.json files (merged)")
+    args = ap.parse_args(argv)
+    if args.summarize:
+        rows = []
+        for f in args.summarize:
+            rows += json.loads(pathlib.Path(f).read_text())["rows"]
+        uniq = {(r["scenario"], r["seed"]): r for r in rows}  # later files win
+        print(summarize(list(uniq.values())))
+        return
+    if args.quick:
+        args.seeds, args.effect_seeds = 4, 2
+        args.weak_seeds = args.power_seeds = 1
+    weak = args.effect_seeds if args.weak_seeds is None else args.weak_seeds
+    power = args.effect_seeds if args.power_seeds is None else args.power_seeds
+
+    bt.enable_x64()
+    cache = bt.enable_compilation_cache()
+    info = machine_info()
+    info["cache"] = cache
+    info["argv"] = sys.argv
+    names = list(SCENARIOS) if args.only is None else args.only.split(",")
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / ("diagnose_study.json" if args.only is None else
+                  f"diagnose_study_{args.only.replace(',', '+')[:80]}.json")
+    rows = []
+    t_start = time.perf_counter()
+    for name in names:
+        if args.budget_s is not None and time.perf_counter() - t_start > args.budget_s:
+            print(f"# budget exhausted: skipping {name}", flush=True)
+            continue
+        if name == "control":
+            n = args.seeds
+        elif SCENARIOS[name][3] != "single":
+            n = power if not name.endswith("_weak") else min(power, weak)
+        else:
+            n = weak if name.endswith("_weak") else args.effect_seeds
+        for i in range(n):
+            seed = SEED_BASE[name] + i
+            try:
+                row, d = run_one(name, seed)
+            except Exception as exc:  # a crash of diagnose is a result, not the end of the study
+                row = {"scenario": name, "seed": seed, "error": f"{type(exc).__name__}: {exc}"}
+                rows.append(row)
+                print(f"{name:20s} seed {seed:5d} ERROR {row['error']}", flush=True)
+                path.write_text(json.dumps({"info": info, "rows": rows}, indent=1))
+                continue
+            rows.append(row)
+            print(f"{name:20s} seed {seed:5d} adequate={row['adequate']!s:5s} "
+                  f"top={row['top']}{'*' if row['top_significant'] else ''} "
+                  f"gof_p={row['gof_p']:.3g} "
+                  + (f"ident={row['identified']} fixed={row['fixed_ok']} "
+                     f"(gof {row['fixed_gof_p']}, truth {row['fixed_truth_ok']}) "
+                     if 'identified' in row else "")
+                  + f"{row['wall_s']:.1f}s", flush=True)
+            if args.verbose or (name == "control" and not row["adequate"]) or (
+                    "identified" in row and not row["fixed_ok"]):
+                print(d.summary(), flush=True)
+            path.write_text(json.dumps({"info": info, "rows": rows}, indent=1))
+    info["total_wall_s"] = time.perf_counter() - t_start
+    info["load_average_end"] = os.getloadavg()
+    path.write_text(json.dumps({"info": info, "rows": rows}, indent=1))
+    print()
+    print(summarize(rows))
+    print(f"\ntotal {info['total_wall_s']:.0f} s; wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
