@@ -227,8 +227,12 @@ def test_diagnose_and_posterior_from_the_cli(tmp_path, capsys):
     assert text.startswith("model: naive") and "goodness of fit" in text
     assert main(["diagnose", manifest, "--add", "nonsense"]) == 1
     assert "unknown effect 'nonsense'" in capsys.readouterr().err
-    assert main(["calibrate", manifest, "--posterior", "--steps", "150", "--walkers", "12",
-                 "--json"]) == 0
+    from blurtrap import ShortChainWarning
+
+    with pytest.warns(ShortChainWarning, match="shorter than 50 integrated autocorrelation"):
+        rc = main(["calibrate", manifest, "--posterior", "--steps", "150", "--walkers", "12",
+                   "--json"])
+    assert rc == 0
     res = json.loads(capsys.readouterr().out)
     assert res["posterior"]["method"] == "posterior"
     assert res["posterior"]["k"] == pytest.approx(res["k"], rel=0.1)
