@@ -191,7 +191,18 @@ def machine_info():
             "python": sys.version.split()[0], "jax": jax.__version__,
             "jaxlib": jaxlib.__version__, "numpy": np.__version__,
             "equinox": equinox.__version__, "blurtrap": bt.__version__,
-            "device": str(jax.devices()[0]), "load_average_start": os.getloadavg()}
+            "device": str(jax.devices()[0]), "load_average_start": os.getloadavg(),
+            "git_head": _git_head()}
+
+
+def _git_head():
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, cwd=pathlib.Path(__file__).parent).stdout.strip()
+    except OSError:  # pragma: no cover
+        return None
 
 
 def summarize(rows):
@@ -263,6 +274,8 @@ def main(argv=None):
     ap.add_argument("--budget-s", type=float, default=None,
                     help="stop starting new scenarios after this many seconds")
     ap.add_argument("--out", default="/tmp/diagnose_study", help="folder for diagnose_study.json")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="start each scenario at seed base + offset (to extend a study)")
     ap.add_argument("--verbose", action="store_true")
     ap.add_argument("--summarize", nargs="+", default=None,
                     help="only print the summary of these diagnose_study.json files (merged)")
@@ -288,8 +301,9 @@ def main(argv=None):
     names = list(SCENARIOS) if args.only is None else args.only.split(",")
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / ("diagnose_study.json" if args.only is None else
-                  f"diagnose_study_{args.only.replace(',', '+')[:80]}.json")
+    stem = "diagnose_study" if args.only is None else (
+        f"diagnose_study_{args.only.replace(',', '+')[:80]}")
+    path = out / (stem + (f"_from{args.seed_offset}" if args.seed_offset else "") + ".json")
     rows = []
     t_start = time.perf_counter()
     for name in names:
@@ -303,7 +317,7 @@ def main(argv=None):
         else:
             n = weak if name.endswith("_weak") else args.effect_seeds
         for i in range(n):
-            seed = SEED_BASE[name] + i
+            seed = SEED_BASE[name] + args.seed_offset + i
             try:
                 row, d = run_one(name, seed)
             except Exception as exc:  # a crash of diagnose is a result, not the end of the study

@@ -141,14 +141,19 @@ def _evidence(effect: str, fit: CalibrationResult, recs) -> str:
     return ""
 
 
-def _line_candidate(fit: CalibrationResult, half_window: int = 500, guard: int = 2):
+def _line_candidate(fit: CalibrationResult, half_window: int = 500, guard: int = 2,
+                    lowest: int = 10):
     """Most significant isolated spike: periodogram/model ratio divided by its local mean
     over +-``half_window`` ordinates (excluding +-``guard`` around the candidate), so broadband
-    misfit (drift, blur) is not mistaken for a line. Under the model each ratio is Exp(1);
-    the p-value accounts for the search over all M ordinates: 1 - (1 - e^-r)^M."""
+    misfit (drift, blur) is not mistaken for a line. The ``lowest`` Fourier frequencies
+    (f < 10/T) are not searched: a "line" there cannot be told from drift. Under the model each
+    ratio is Exp(1); the p-value accounts for the search over all M ordinates:
+    1 - (1 - e^-r)^M."""
     f, ratio, w = _bands(fit)
     keep = w > 0
     f, q = f[keep], ratio[keep]
+    if q.size > 4 * lowest:
+        f, q = f[lowest:], q[lowest:]
     m = q.size
     hw = min(half_window, max(m // 4, 1))
     c = np.concatenate([[0.0], np.cumsum(np.pad(q, hw, mode="reflect"))])
@@ -207,7 +212,11 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     if k is None:
         k = "linear_power" if multi_power else ("shared" if len(powers) <= 1 else "per_power")
     notes = []
-    base = calibrate(recs, method="likelihood", likelihood="whittle", model=mdl, k=k)
+    base = calibrate(recs, method="likelihood", likelihood="whittle", model=mdl, k=k,
+                     strict=False)
+    if not np.all(np.isfinite(base.errors)):
+        notes.append("the base model's Fisher information is singular (a parameter is pinned "
+                     "at its bound): its standard errors are undefined, a sign of misfit")
     fs = 1.0 / float(np.median([float(r.frame_interval) for r in recs]))
     fast = fs >= 10_000.0
     if candidates is None:
@@ -298,7 +307,8 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         try:
             start = None if top.effect in _CORE_FLAGS else base.params
             best_fit = calibrate(recs, method="likelihood", likelihood="whittle",
-                                 model=mdl.add(top.effect, **cfg), k=k, start=start)
+                                 model=mdl.add(top.effect, **cfg), k=k, start=start,
+                                 strict=False)
             ranked[0] = dataclasses.replace(top, fit=best_fit)
         except (FitError, ValueError) as exc:
             notes.append(f"full refit with {top.effect} failed: {exc}")

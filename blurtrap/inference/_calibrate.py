@@ -266,7 +266,7 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
 _psd_jit = eqx.filter_jit(spectral_model_psd)
 
 
-def _check_fit(out, names, method):
+def _check_fit(out, names, method, strict=True, notes=None):
     if not bool(out.converged):
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
@@ -274,6 +274,11 @@ def _check_fit(out, names, method):
             "Try another method or check the data (drift, wrong exposure/frame interval)."
         )
     if not bool(out.hessian_pd):
+        if not strict:
+            if notes is not None:
+                notes.append(f"{method}: the Fisher information is singular (a parameter at "
+                             "its bound or unidentifiable): standard errors are NaN")
+            return
         raise FitError(
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
             "not all identifiable from these data (e.g. dt >> tau leaves no temporal "
@@ -322,11 +327,12 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
     )
 
 
-def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None):
+def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None,
+                  strict=True):
     args = _spectral_args(recs, layout, model, n_blocks, f_range)
     scale = _start_vector(recs, layout, model.noise, start)
     out = fit_ml(spectral_nll, scale, args)
-    _check_fit(out, layout.names, method_name)
+    _check_fit(out, layout.names, method_name, strict, notes)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
@@ -468,6 +474,7 @@ def calibrate(
     diffusion: float | None = None,
     pade: bool = False,
     start: dict | None = None,
+    strict: bool = True,
 ) -> CalibrationResult:
     """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
 
@@ -490,6 +497,8 @@ def calibrate(
     - `diffusion`, `pade`: for blur-corrected equipartition.
     - `start`: optional start values by parameter name (SI), e.g. from a previous fit
       (``result.params``); missing names use the closed-form starts.
+    - `strict`: raise ``FitError`` when the Fisher information is singular (default); with
+      ``strict=False`` (spectral methods) the fit is returned with NaN errors and a note.
 
     **Returns:** :class:`CalibrationResult` (SI units).
 
@@ -557,12 +566,12 @@ def calibrate(
         notes.append(f"likelihood: {use}")
         if use == "exact":
             return _fit_exact(recs, layout, mdl, notes)
-        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes, start)
+        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes, start, strict)
     if method == "psd":
         nb = n_blocks
         if nb is None:
             nb = max(1, min(128, min(r.n_frames for r in recs) // 64))
-        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start)
+        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict)
     if method in ("variance_vs_exposure", "variance_vs_power"):
         if method == "variance_vs_power" and k != "linear_power":
             warnings.warn("variance_vs_power is usually run with k='linear_power'", stacklevel=2)

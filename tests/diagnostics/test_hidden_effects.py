@@ -135,3 +135,14 @@ def test_model_add_and_compare():
         bt.TrapModel() + "glue"
     with pytest.raises(ValueError, match="already in the model"):
         m + "drift"
+
+
+def test_regressions_from_the_diagnose_study():
+    """benchmarks/study_diagnose.py found (1) drift named as a 'line' at the lowest Fourier
+    frequency (seed 2102) and (2) a crash when the base fit pins eps^2 at 0 (seed 2503)."""
+    d = bt.diagnose(record(2102, injections=(bt.RandomWalkDrift(2e-16),)))
+    assert d.ranking[0].effect == "drift"
+    assert not any(c.significant for c in d.ranking if c.effect == "line_noise")
+    no_blur = bt.TrapModel(blur=False, alias=True, noise=True, name="aliased+noise")
+    d = bt.diagnose(record(2503), model=no_blur)
+    assert not d.adequate and d.ranking[0].effect == "motion_blur"
