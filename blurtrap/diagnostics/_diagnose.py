@@ -223,7 +223,8 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         candidates = [c for c in SPECTRAL_CANDIDATES if not mdl.has(c)]
         if not fast:
             candidates = [c for c in candidates if c not in ("detector_filter", "hydrodynamics")]
-        if not mdl.blur:
+        if not mdl.blur or len({float(r.exposure) for r in recs}) < 2:
+            # one exposure: the kernel shape is absorbed by k, gamma, eps^2 (exact ARMA(1,1))
             candidates = [c for c in candidates if c != "exposure_kernel"]
         if multi_power and k == "linear_power":
             candidates += [c for c in RELATION_CANDIDATES if not mdl.has(c)]
