@@ -12,8 +12,6 @@ import json
 import math
 import sys
 
-from .inference._result import LAB
-
 _METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
             "equipartition")
 _MODELS = ("standard", "blur", "naive", "naive_aliased")
@@ -216,51 +214,8 @@ def _simulate(args) -> int:
 # calibrate
 # ------------------------------------------------------------------------------------------
 def format_result(result) -> str:
-    """A readable lab-unit table of a ``CalibrationResult``."""
-    from .physics import BOLTZMANN
-
-    rows = []
-    for name, v, e in zip(result.param_names, result.values, result.errors, strict=True):
-        base = name.split("[")[0]
-        fac, unit = LAB.get(base, (1.0, "SI"))
-        rows.append((name, v * fac, e * fac, unit))
-    g = result.gamma
-    if math.isfinite(g):
-        fac, unit = LAB["diffusion"]
-        rows.append(("D = kT/gamma", result.diffusion * fac, result.diffusion_err * fac, unit))
-        k = result.k
-        if "c" not in result.param_names:
-            tau = g / k
-            rows.append(("tau = gamma/k" + (" (first)" if len(set(map(float,
-                          result.k_per_recording))) > 1 else ""), tau * 1e3, math.nan, "ms"))
-            rows.append(("f_c = k/(2 pi gamma)", k / (2 * math.pi * g), math.nan, "Hz"))
-    if "tracking_var" in result.param_names:
-        tv = max(result.tracking_var, 0.0)
-        rows.append(("eps (tracking rms)", math.sqrt(tv) * 1e9, math.nan, "nm"))
-    if "c" in result.param_names or len(result.k_per_recording) > 1:
-        ks = result.k_per_recording
-        es = result.k_per_recording_err
-        if "c" in result.param_names or len(set(map(float, ks))) > 1:
-            for i, (kk, ee) in enumerate(zip(ks, es, strict=True)):
-                rows.append((f"k (recording {i})", kk * 1e3, ee * 1e3, "pN/nm"))
-    w = max(len(r[0]) for r in rows)
-    lines = [f"method: {result.method}   model: {result.model}   recordings: "
-             f"{result.n_recordings}   frames: {result.n_frames}   T = "
-             f"{result.temperature:g} K (kT = {BOLTZMANN * result.temperature * 1e21:.4g} pN nm)"]
-    lines.append(f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  unit")
-    for name, v, e, unit in rows:
-        err = f"{e:10.3g}" if math.isfinite(e) else " " * 10
-        lines.append(f"  {name.ljust(w)}  {v:12.6g}  {err}  {unit}")
-    gof = result.gof
-    if gof:
-        lines.append(f"  goodness of fit: {gof.get('test', '')}: statistic = "
-                     f"{gof.get('statistic', math.nan):.4g}, dof = {gof.get('dof')}, "
-                     f"p = {gof.get('p_value', math.nan):.3g}")
-    for b in result.at_bounds:
-        lines.append(f"  note: {b} is at its lower bound (0)")
-    for n in result.notes:
-        lines.append(f"  note: {n}")
-    return "\n".join(lines)
+    """A readable lab-unit table of a ``CalibrationResult`` (its ``summary()``)."""
+    return result.summary()
 
 
 def _calibrate(args) -> int:

@@ -9,7 +9,6 @@ from ._effects import AbstractEffect as AbstractEffect
 from ._effects import make_effect as make_effect
 from ._fit import FitOutput as FitOutput
 from ._fit import fit_ml as fit_ml
-from ._fit import fit_ml_batch as fit_ml_batch
 from ._likelihood import (
     arma_loglik as arma_loglik,
 )

@@ -115,25 +115,6 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -
 
 
 @eqx.filter_jit
-def fit_ml_batch(nll, scale, args, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOutput:
-    """``fit_ml`` vmapped over a leading batch axis of ``scale`` and ``args``; every item
-    gets its own status (one failure does not abort the batch). Newton with an in-graph
-    BFGS fallback for items where Newton failed."""
-
-    def one(s, a):
-        f, x_n, ok, n_n = _newton(nll, s, a, rtol, atol)
-
-        def fallback(_):
-            _, x_b, ok_b, n_b = _bfgs(nll, s, a, rtol, atol, max_steps)
-            return x_b, ok_b, n_b
-
-        x, ok2, n = jax.lax.cond(ok, lambda _: (x_n, ok, n_n), fallback, None)
-        return _finish(f, x, a, s, ok2, n)
-
-    return jax.vmap(one)(scale, args)
-
-
-@eqx.filter_jit
 def _bfgs_value_only(nll, scale, args, rtol, atol, max_steps):
     f, x, ok, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
     return scale * jnp.exp(x), f(x, args), ok

@@ -30,7 +30,6 @@ from ..physics._effects import fold_sum, water_viscosity
 from ..physics._spectra import _expected_block_periodogram, _psd_coeffs
 from ._effects import EFFECTS, AbstractEffect, make_effect
 
-MODEL_NAMES = ("naive", "naive_aliased", "blur", "standard")
 _FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}
 
 

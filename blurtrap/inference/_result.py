@@ -150,21 +150,43 @@ class CalibrationResult:
         return out
 
     def summary(self) -> str:
-        """A table in lab units."""
-        lines = [f"method: {self.method}   model: {self.model}   "
-                 f"recordings: {self.n_recordings}   frames: {self.n_frames}"]
-        for name, v, e in zip(self.param_names, self.values, self.errors):
+        """A readable table in lab units (used by the CLI too): parameters with errors,
+        derived D, tau, f_c and eps, per-recording k, goodness of fit and notes."""
+        rows = []
+        for name, v, e in zip(self.param_names, self.values, self.errors, strict=True):
             base = name.split("[")[0]
             fac, unit = LAB.get(base, (1.0, "SI"))
-            lines.append(f"  {name:<22s} = {v * fac:12.6g} +- {e * fac:10.3g} {unit}")
-        fac, unit = LAB["diffusion"]
-        lines.append(f"  {'D':<22s} = {self.diffusion * fac:12.6g} +- "
-                     f"{self.diffusion_err * fac:10.3g} {unit}")
-        g = self.gof
-        if g:
-            lines.append(f"  goodness of fit: {g.get('test', '')} statistic = "
-                         f"{g.get('statistic', float('nan')):.4g}, dof = {g.get('dof')}, "
-                         f"p = {g.get('p_value', float('nan')):.3g}")
+            rows.append((name, v * fac, e * fac, unit))
+        g = self.gamma
+        if math.isfinite(g):
+            fac, unit = LAB["diffusion"]
+            rows.append(("D = kT/gamma", self.diffusion * fac, self.diffusion_err * fac, unit))
+            k = self.k
+            if "c" not in self.param_names:
+                tau = g / k
+                rows.append(("tau = gamma/k" + (" (first)" if len(set(map(float,
+                              self.k_per_recording))) > 1 else ""), tau * 1e3, math.nan, "ms"))
+                rows.append(("f_c = k/(2 pi gamma)", k / (2 * math.pi * g), math.nan, "Hz"))
+        if "tracking_var" in self.param_names:
+            tv = max(self.tracking_var, 0.0)
+            rows.append(("eps (tracking rms)", math.sqrt(tv) * 1e9, math.nan, "nm"))
+        ks, es = self.k_per_recording, self.k_per_recording_err
+        if "c" in self.param_names or len(set(map(float, ks))) > 1:
+            for i, (kk, ee) in enumerate(zip(ks, es, strict=True)):
+                rows.append((f"k (recording {i})", kk * 1e3, ee * 1e3, "pN/nm"))
+        w = max(len(r[0]) for r in rows)
+        lines = [f"method: {self.method}   model: {self.model}   recordings: "
+                 f"{self.n_recordings}   frames: {self.n_frames}   T = "
+                 f"{self.temperature:g} K (kT = {BOLTZMANN * self.temperature * 1e21:.4g} pN nm)"]
+        lines.append(f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  unit")
+        for name, v, e, unit in rows:
+            err = f"{e:10.3g}" if math.isfinite(e) else " " * 10
+            lines.append(f"  {name.ljust(w)}  {v:12.6g}  {err}  {unit}")
+        gof = self.gof
+        if gof:
+            lines.append(f"  goodness of fit: {gof.get('test', '')}: statistic = "
+                         f"{gof.get('statistic', math.nan):.4g}, dof = {gof.get('dof')}, "
+                         f"p = {gof.get('p_value', math.nan):.3g}")
         for b in self.at_bounds:
             lines.append(f"  note: {b} is at its lower bound (0)")
         for n in self.notes:

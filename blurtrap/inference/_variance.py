@@ -17,7 +17,7 @@ import numpy as np
 import optimistix as optx
 
 from ..physics._constants import BOLTZMANN
-from ..physics._spectra import _autocovariance, _psd_discrete, _sample_variance_var
+from ..physics._spectra import _sample_variance_var
 from ._models import TrapModel
 from ._problems import Layout, RecMeta
 
@@ -148,13 +148,3 @@ def drift_extrapolation(y, frame_interval, *, corner_frequency, fraction=(0.1, 0
     a = np.vstack([np.ones_like(cut), cut]).T
     coef, *_ = np.linalg.lstsq(a, v, rcond=None)
     return float(coef[0]), float(coef[1]), cut, v
-
-
-def psd_at_zero(k, gamma, exposure, frame_interval, temperature, tracking_var):
-    return _psd_discrete(
-        jnp.asarray(0.0), BOLTZMANN * temperature / k, gamma / k, exposure, frame_interval,
-        tracking_var,
-    )
-
-
-__all__ = ["empirical_variance_se", "fit_variances", "drift_extrapolation", "_autocovariance"]
