@@ -108,7 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("FMIN", "FMAX"),
                    help="frequency range fitted by the spectral methods [Hz]")
     c.add_argument("--diffusion", type=float, default=None, metavar="UM2_PER_S",
-                   help="known D [um^2/s] for blur-corrected --method equipartition")
+                   help="known D [um^2/s]: blur-corrected --method equipartition, and the "
+                        "fallback of --method auto when frames carry no temporal information")
     c.add_argument("--posterior", action="store_true",
                    help="also sample the posterior with emcee (medians, 68 %%/95 %% intervals)")
     c.add_argument("--steps", type=int, default=2000, metavar="N",
@@ -233,9 +234,7 @@ def _calibrate(args) -> int:
         kw["n_blocks"] = args.n_blocks
     if args.f_range is not None:
         kw["f_range"] = tuple(args.f_range)
-    if args.diffusion is not None:
-        if args.method != "equipartition":
-            raise CliError("--diffusion applies to --method equipartition only")
+    if args.diffusion is not None:  # calibrate checks that the method uses it
         kw["diffusion"] = args.diffusion * 1e-12
     result = calibrate(str(path), **kw)
     post = None

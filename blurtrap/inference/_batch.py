@@ -31,8 +31,12 @@ class BatchCalibration:
     tracking_var: np.ndarray
     tracking_var_err: np.ndarray
     diffusion: np.ndarray
-    success: np.ndarray  # bool: converged and Fisher matrix positive definite
+    success: np.ndarray  # bool: status == "ok"
     n_steps: np.ndarray
+    #: per item: "ok", "not converged", "singular Fisher information" (a parameter at its
+    #: bound or unidentifiable: errors are NaN) or "relaxation not resolved" (tau > T/3: the
+    #: bead diffuses almost freely and k is not identified)
+    status: np.ndarray
     method: str
     model: str
 
@@ -98,8 +102,10 @@ def calibrate_batch(
 ) -> BatchCalibration:
     """Calibrate each row of ``positions`` (shape (B, N), metres) in one vmapped call.
 
-    Uses the Whittle likelihood (``n_blocks=1``, the default of :func:`calibrate` for long
-    records) or the blocked-PSD Gamma likelihood (``n_blocks > 1``) with the given model.
+    Items are independent: each has its own ``status`` and a failing item never aborts
+    the batch (its errors are NaN). Uses the Whittle likelihood (``n_blocks=1``, the
+    default of :func:`calibrate` for long records) or the blocked-PSD Gamma likelihood
+    (``n_blocks > 1``) with the given model.
     All rows share ``frame_interval`` [s], ``exposure`` [s] and ``temperature`` [K].
 
     **Returns:** :class:`BatchCalibration` with per-item values, errors and ``success``.
@@ -112,6 +118,8 @@ def calibrate_batch(
         bad = np.argwhere(~np.isfinite(y))[0]
         raise ValueError(f"positions contain NaN/inf (first at row {bad[0]}, frame {bad[1]})")
     b, n = y.shape
+    if isinstance(n_blocks, bool) or not isinstance(n_blocks, (int, np.integer)) or n_blocks < 1:
+        raise ValueError(f"n_blocks must be an integer >= 1; got n_blocks = {n_blocks!r}")
     m = n // n_blocks
     if m < 8:
         raise ValueError(f"n_blocks = {n_blocks} leaves {m} frames per block; need >= 8")
@@ -137,7 +145,15 @@ def calibrate_batch(
         f=jnp.asarray(f[None]), s2=jnp.asarray(np.sin(np.pi * f * dt)[None] ** 2),
         power=jnp.asarray(power[:1, None, :][0]), weight=jnp.asarray(weight[None]),
         log_ref=jnp.asarray(0.0),
+        # the exact expected periodogram of M frames, as in calibrate
+        block_len=(jnp.asarray([float(m)]) if mdl.alias and mdl.closed_form else None),
     )
+    constant = np.ptp(y, axis=1) == 0  # no fluctuations: reported per item, not fitted
+    if constant.any():
+        rng = np.random.default_rng(0)  # harmless stand-in data for the vmapped fit only
+        y = y.copy()
+        y[constant] = rng.standard_normal((int(constant.sum()), n)) * 1e-8
+        power[constant] = power[~constant].mean(axis=0) if (~constant).any() else 1e-20
     starts = _moment_starts(y, dt, w, t)
     if not mdl.noise:
         starts = starts[:, :2]
@@ -147,6 +163,7 @@ def calibrate_batch(
     val = np.array(out.value)
     cov = np.array(out.cov)
     success = np.array(out.success)
+    converged, pd = np.array(out.converged), np.array(out.hessian_pd)
     steps = np.array(out.n_steps)
     for i in np.flatnonzero(~success):  # rare: refit alone with the BFGS fallback
         a = eqx.tree_at(lambda z: (z.power, z.log_ref), shared,
@@ -154,6 +171,17 @@ def calibrate_batch(
         one = _bfgs_jit(spectral_nll, jnp.asarray(starts[i]), a, 1e-9, 1e-9, 400)
         val[i], cov[i] = np.asarray(one.value), np.asarray(one.cov)
         success[i], steps[i] = bool(one.success), int(one.n_steps)
+        converged[i], pd[i] = bool(one.converged), bool(one.hessian_pd)
+    status = np.full(b, "ok", dtype=object)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unresolved = ~(val[:, 1] / val[:, 0] < m * dt / 3.0)
+    status[unresolved] = "relaxation not resolved"
+    status[~pd] = "singular Fisher information"
+    status[~converged] = "not converged"
+    status[constant] = "constant trace"
+    val[constant] = np.nan
+    success = status == "ok"
+    cov[~success] = np.nan  # never a confident error bar on a failed item
     err = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
     kt = BOLTZMANN * t
     zeros = np.zeros(b)
@@ -162,6 +190,6 @@ def calibrate_batch(
         tracking_var=val[:, 2] if mdl.noise else zeros,
         tracking_var_err=err[:, 2] if mdl.noise else zeros,
         diffusion=kt / val[:, 1],
-        success=success, n_steps=steps,
+        success=success, n_steps=steps, status=status.astype(str),
         method="likelihood" if n_blocks == 1 else "psd", model=mdl.name,
     )

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import numbers
 import os
 import warnings
 
@@ -44,6 +46,12 @@ def as_recordings(data) -> list:
             "are unknown. Wrap arrays with blurtrap.from_arrays(positions, frame_interval=..., "
             "exposure=...)."
         )
+    elif isinstance(data, dict):
+        raise TypeError(
+            "data is a dict; expected a Recording, a RecordingSet, a list of Recordings or a "
+            "manifest path (load a manifest dict with blurtrap.load or build Recordings with "
+            "blurtrap.from_arrays)"
+        )
     else:
         try:
             recs = list(data)
@@ -54,9 +62,12 @@ def as_recordings(data) -> list:
             ) from None
     if not recs:
         raise ValueError("data holds no recordings")
-    for r in recs:
+    for i, r in enumerate(recs):
         if not (hasattr(r, "positions") and hasattr(r, "frame_interval")):
-            raise TypeError(f"expected Recording objects; got {type(r).__name__}")
+            hint = (" (a bare array: its frame interval and exposure are unknown; wrap arrays "
+                    "with blurtrap.from_arrays(positions, frame_interval=..., exposure=...))"
+                    if hasattr(r, "shape") else "")
+            raise TypeError(f"data[{i}] is a {type(r).__name__}; expected a Recording{hint}")
         warn_if_float32("positions", r.positions)
     return recs
 
@@ -124,9 +135,10 @@ def moment_start(rec):
 
 
 def temporal_information(rec, z_min=5.0):
-    """Whether frames resolve the relaxation: lag-1 autocorrelation significantly > 0
-    (``r1 sqrt(N) > z_min``) and a lag ratio C(2)/C(1) in (0.05, 1).
-    Returns ``(informative, z)``."""
+    """Whether frames carry information on the relaxation time: the lag-1 autocorrelation
+    is significantly positive, ``r1 sqrt(N) > z_min`` (under white frames r1 sqrt(N) is
+    standard normal). Frames lose it when dt >> tau (and W << dt), or when the tracking noise
+    swamps the motion. Returns ``(informative, z)``."""
     y = np.asarray(rec.positions, dtype=float)
     y = y - y.mean()
     n = y.size
@@ -134,10 +146,8 @@ def temporal_information(rec, z_min=5.0):
         return False, 0.0
     c0 = float(np.mean(y * y))
     c1 = float(np.mean(y[1:] * y[:-1]))
-    c2 = float(np.mean(y[2:] * y[:-2]))
     z = c1 / c0 * math.sqrt(n) if c0 > 0 else 0.0
-    ratio = c2 / c1 if c1 > 0 else 0.0
-    return bool(z > z_min and 0.05 < ratio < 1.0), z
+    return bool(z > z_min), z
 
 
 def _start_vector(recs, layout, noise, start=None):
@@ -221,9 +231,11 @@ def spectral_gof(ratio, weight, n_params, min_dof=64):
 # spectral (Whittle / blocked) and exact likelihood fits
 # ------------------------------------------------------------------------------------------
 def _spectral_args(recs, layout, model, n_blocks, f_range):
-    """Periodogram ordinates of all recordings. For blocked spectra (``n_blocks > 1``) the
-    model is the exact expected block periodogram (leakage of the finite block included);
-    for the full-record Whittle likelihood the leakage is O(1/N) and P_d(f) is used."""
+    """Periodogram ordinates of all recordings. Whenever the model has the closed form, its
+    expectation is the exact expected periodogram of a block of M frames (the Fejer-kernel
+    leakage of the finite block included, same cost as P_d): for blocked spectra and for the
+    full-record Whittle likelihood alike, so that records that are not long compared with
+    tau are not biased. Models with extra effects use P_d(f) (leakage O(tau/T))."""
     fs, ps, ws, ms = [], [], [], []
     for r in recs:
         nb = max(int(n_blocks), 1)
@@ -259,30 +271,71 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
         weight=jnp.asarray(pad(ws, 0.0)),
         log_ref=jnp.asarray(np.log(ref)),
         block_len=(jnp.asarray(np.array(ms, dtype=float))
-                   if n_blocks > 1 and model.alias and model.closed_form else None),
+                   if model.alias and model.closed_form else None),
     )
 
 
 _psd_jit = eqx.filter_jit(spectral_model_psd)
 
 
-def _check_fit(out, names, method, strict=True, notes=None):
+def _slow_relaxation_hint(recs, values, names):
+    """A sentence when the fitted tau is not short compared with the record (else '')."""
+    if "gamma" not in names or "k" not in names:
+        return ""
+    tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
+    dur = min(r.n_frames * float(r.frame_interval) for r in recs)
+    if math.isfinite(tau) and tau > dur / 30.0:
+        return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is not short compared "
+                f"with the record ({dur:.3g} s): the bead diffuses almost freely, so k is not "
+                "identified; record longer or use a stiffer trap.")
+    return ""
+
+
+def _check_relaxation_resolved(res, recs, method, block_frames=None):
+    """Refuse a fit whose relaxation time is longer than a third of the record (or block):
+    the bead then diffuses almost freely, the likelihood runs k towards 0, and the observed
+    Fisher information at that edge gives a meaningless, tiny error on k. gamma (D) is still
+    identified and is quoted in the message."""
+    g, ge = res.gamma, res.gamma_err
+    if not math.isfinite(g):
+        return res
+    for i, (r, kk) in enumerate(zip(recs, res.k_per_recording)):
+        n = r.n_frames if block_frames is None else min(block_frames, r.n_frames)
+        dur = n * float(r.frame_interval)
+        tau = g / float(kk)
+        if not (tau < dur / 3.0):
+            what = "record" if block_frames is None else f"block ({n} frames)"
+            d = BOLTZMANN * float(r.temperature) / g
+            raise FitError(
+                f"{method} fit: the relaxation time tau = gamma/k = {tau:.3g} s of recording {i} "
+                f"is longer than a third of the {what} ({dur:.3g} s): the bead diffuses almost "
+                f"freely and k is not identified (the fit ran it to {float(kk):.3g} N/m). gamma "
+                f"= {g:.4g} +- {ge:.2g} N s/m (D = {d * 1e12:.4g} um^2/s) is still determined. "
+                "Record longer than ~10 tau, use a stiffer trap"
+                + (", or fewer, longer blocks (n_blocks)" if block_frames else "") + "."
+            )
+    return res
+
+
+def _check_fit(out, names, method, strict=True, notes=None, recs=None):
+    hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
     if not bool(out.converged):
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
             f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
             "Try another method or check the data (drift, wrong exposure/frame interval)."
+            + hint
         )
     if not bool(out.hessian_pd):
         if not strict:
             if notes is not None:
                 notes.append(f"{method}: the Fisher information is singular (a parameter at "
-                             "its bound or unidentifiable): standard errors are NaN")
+                             "its bound or unidentifiable): standard errors are NaN" + hint)
             return
         raise FitError(
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
             "not all identifiable from these data (e.g. dt >> tau leaves no temporal "
-            "information; use recordings at several exposures or powers)"
+            "information; use recordings at several exposures or powers)." + hint
         )
 
 
@@ -332,13 +385,15 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
     args = _spectral_args(recs, layout, model, n_blocks, f_range)
     scale = _start_vector(recs, layout, model.noise, start)
     out = fit_ml(spectral_nll, scale, args)
-    _check_fit(out, layout.names, method_name, strict, notes)
+    _check_fit(out, layout.names, method_name, strict, notes, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
               "f": np.asarray(args.f), "ratio": np.asarray(args.power / psd),
               "weight": np.asarray(args.weight)}
-    return _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras)
+    res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras)
+    block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
+    return _check_relaxation_resolved(res, recs, method_name, block)
 
 
 @float64_scope
@@ -371,12 +426,29 @@ def _fit_exact(recs, layout, model, notes):
     if bool(wout.success):
         scale = wout.value
     out = fit_ml_fd_newton(exact_nll, scale, args)
-    _check_fit(out, layout.names, "likelihood (exact)")
+    _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
     extras = {"loglik": -float(out.nll)}
-    return _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras)
+    res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras)
+    return _check_relaxation_resolved(res, recs, "likelihood (exact)")
+
+
+#: Switch from Whittle to the exact likelihood above this leakage index (see below).
+_LEAKAGE_INDEX_MAX = 0.15
+
+
+def _leakage_index(recs, k_values, gamma):
+    """``max_r sqrt(N_r) tau_r / T_r``: the Whittle likelihood's periodogram leakage bias in
+    units of the standard error scales like this. Measured (benchmarks/RESULTS_calibration.md,
+    8 seeds x 65 536 frames, W = dt): the Whittle-minus-exact shift of gamma is 2.0, 0.7, 0.2,
+    0.08 SE at index 8.5, 2.6, 0.85, 0.26; at <= 0.15 it is below 0.05 SE."""
+    idx = 0.0
+    for r, kk in zip(recs, np.broadcast_to(np.asarray(k_values, dtype=float), (len(recs),))):
+        tau = gamma / kk
+        idx = max(idx, math.sqrt(r.n_frames) * tau / (r.n_frames * float(r.frame_interval)))
+    return idx
 
 
 def _default_k_mode(recs):
@@ -461,6 +533,96 @@ def _equipartition(recs, diffusion, pade):
     )
 
 
+_K_MODES = (None, "shared", "per_recording", "per_power", "linear_power")
+#: D of a 1 nm sphere in water is ~2e-10 m^2/s: anything above this is a unit slip.
+_MAX_PLAUSIBLE_DIFFUSION = 1e-8
+
+
+def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pade, start,
+                   strict):
+    """Validate calibrate's options; nothing given is ignored silently."""
+    if k not in _K_MODES:
+        raise ValueError(f"k must be one of {_K_MODES[1:]} (or None for the default); "
+                         f"got k = {k!r}")
+    if not isinstance(strict, (bool, np.bool_)):
+        raise ValueError(f"strict must be True or False; got strict = {strict!r}")
+    if not isinstance(pade, (bool, np.bool_)):
+        raise ValueError(f"pade must be True or False; got pade = {pade!r}")
+    if n_blocks is not None:
+        if method != "psd":
+            raise ValueError(f"n_blocks = {n_blocks!r} applies only to method='psd'; got "
+                             f"method = {method!r}")
+        if isinstance(n_blocks, bool) or not isinstance(n_blocks, numbers.Integral) \
+                or n_blocks < 1:
+            raise ValueError(f"n_blocks must be an integer >= 1 (number of non-overlapping "
+                             f"blocks); got n_blocks = {n_blocks!r}")
+        n_blocks = int(n_blocks)
+    if f_range is not None:
+        if method in ("equipartition", "variance_vs_exposure", "variance_vs_power") or \
+                (method in ("auto", "likelihood") and likelihood == "exact"):
+            raise ValueError(f"f_range = {f_range!r} applies only to the spectral methods "
+                             "(method='psd', or the Whittle likelihood); got method = "
+                             f"{method!r}, likelihood = {likelihood!r}")
+        try:
+            lo, hi = (float(v) for v in f_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"f_range must be two numbers (f_min, f_max) in Hz; got "
+                             f"f_range = {f_range!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+            raise ValueError(f"f_range must satisfy 0 <= f_min < f_max (finite, Hz); got "
+                             f"f_range = ({lo!r}, {hi!r})")
+        nyq = max(0.5 / float(r.frame_interval) for r in recs)
+        if lo >= nyq:
+            raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz starts above the Nyquist "
+                             f"frequency {nyq:g} Hz of the recordings (f_range is in Hz, not kHz)")
+        f_range = (lo, hi)
+    if diffusion is not None:
+        if method not in ("equipartition", "auto"):
+            raise ValueError(f"diffusion = {diffusion!r} is used only by method='equipartition' "
+                             f"(and by 'auto' when frames carry no temporal information); got "
+                             f"method = {method!r}")
+        d = float(diffusion) if isinstance(diffusion, numbers.Real) and not isinstance(
+            diffusion, bool) else math.nan
+        if not (math.isfinite(d) and d > 0):
+            raise ValueError(f"diffusion (diffusion coefficient D) must be finite and > 0 "
+                             f"m^2/s; got diffusion = {diffusion!r}")
+        if d > _MAX_PLAUSIBLE_DIFFUSION:
+            raise ValueError(
+                f"diffusion = {d:g} m^2/s is implausibly large (a 1 nm sphere in water has "
+                f"D ~ 2e-10 m^2/s): it looks like um^2/s. D is in SI units: 1 um^2/s = 1e-12 m^2/s"
+            )
+    elif pade:
+        raise ValueError("pade=True selects the Pade inversion of blur-corrected equipartition "
+                         "and needs diffusion=D; got diffusion=None")
+    if start is not None:
+        if not isinstance(start, dict):
+            raise ValueError(f"start must be a dict of start values by parameter name; got "
+                             f"{type(start).__name__}")
+        for name, v in start.items():
+            ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) \
+                and v > 0
+            if not ok:
+                raise ValueError(f"start[{name!r}] must be a finite number > 0 (SI units); got "
+                                 f"{v!r}")
+    return n_blocks, f_range
+
+
+def _no_temporal_information_message(recs, info):
+    best = max(z for _, z in info)
+    v, se = empirical_variance_se(recs[0].positions)
+    n = min(r.n_frames for r in recs)
+    why = (f"only {n} frames" if n < 200 else
+           "dt >> tau (the bead relaxes between frames), or tracking noise dominates the motion")
+    return (
+        f"these recordings cannot identify gamma: the lag-1 correlation of the frames is only "
+        f"{best:.1f} standard errors above 0 ({why}) and there are fewer than 3 exposures or "
+        f"laser powers. What they do determine is the frame variance var(X_m) = "
+        f"{v * 1e18:.4g} +- {se * 1e18:.2g} nm^2 (recording 0). Give the diffusion coefficient "
+        "(diffusion=D with method='auto' or 'equipartition': blur-corrected equipartition), or "
+        "record an exposure series or a power series."
+    )
+
+
 @float64_scope
 def calibrate(
     data,
@@ -511,6 +673,8 @@ def calibrate(
         raise ValueError(f"likelihood must be 'auto', 'exact' or 'whittle'; got {likelihood!r}")
     recs = as_recordings(data)
     mdl: TrapModel = get_model(model)
+    n_blocks, f_range = _check_options(recs, method, likelihood, k, n_blocks, f_range,
+                                       diffusion, pade, start, strict)
     notes: list[str] = []
 
     if method == "equipartition":
@@ -536,12 +700,16 @@ def calibrate(
                          "information) in the joint likelihood")
             if k is None:
                 k = "linear_power"
+        elif diffusion is not None:
+            best = max(z for _, z in info)
+            res = _equipartition(recs, diffusion, pade)
+            return dataclasses.replace(res, notes=(
+                f"auto: frames carry no temporal information (lag-1 correlation only {best:.1f} "
+                "standard errors above 0: dt >> tau, or tracking noise dominates) and there are "
+                "fewer than 3 exposures or powers; k from blur-corrected equipartition with the "
+                "given D, assuming eps^2 = 0 (any tracking noise biases k low)",) + res.notes)
         else:
-            raise FitError(
-                "these recordings cannot identify gamma: frames are uncorrelated (dt >> tau) "
-                "and there are fewer than 3 exposures or laser powers. Give the diffusion "
-                "coefficient (method='equipartition', diffusion=D) or record an exposure series."
-            )
+            raise FitError(_no_temporal_information_message(recs, info))
         method = "likelihood"
 
     if k is None:
@@ -549,6 +717,11 @@ def calibrate(
     if mdl.has("power_offset") and k != "linear_power":
         raise ValueError("the power_offset effect needs k='linear_power' (k = c (P - P0))")
     layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
+    if start:
+        unknown = sorted(set(start) - set(layout.names))
+        if unknown:
+            raise ValueError(f"start has parameter names {unknown} that this model does not "
+                             f"have; its parameters are {list(layout.names)}")
 
     if mdl.extra and method in ("variance_vs_exposure", "variance_vs_power"):
         raise ValueError(f"method {method!r} fits only the core model; effects "
@@ -563,10 +736,36 @@ def calibrate(
                                  "model only; use likelihood='whittle' with effects "
                                  f"{[e.name for e in mdl.extra]}")
             use = "whittle"
-        notes.append(f"likelihood: {use}")
+        exact_ok = not mdl.extra and f_range is None and mdl.alias and mdl.closed_form
+        if use == "whittle" and likelihood == "auto" and exact_ok:
+            ks, gs = zip(*[moment_start(r)[:2] for r in recs])
+            if _leakage_index(recs, ks, float(np.median(gs))) > _LEAKAGE_INDEX_MAX:
+                use = "exact"
+                notes.append("likelihood: exact (the relaxation time is not short compared with "
+                             "the record, where the Whittle approximation is biased)")
         if use == "exact":
+            if not notes or not notes[-1].startswith("likelihood: exact"):
+                notes.append("likelihood: exact")
             return _fit_exact(recs, layout, mdl, notes)
-        return _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", notes, start, strict)
+        res = _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", list(notes), start,
+                            strict)
+        p = res.params
+        if "gamma" in p and "c" not in p:
+            kvals = res.k_per_recording
+            leak = _leakage_index(recs, kvals, p["gamma"])
+            if leak > _LEAKAGE_INDEX_MAX:
+                if likelihood == "auto" and exact_ok:
+                    notes.append("likelihood: exact (the fitted relaxation time is not short "
+                                 "compared with the record, where the Whittle approximation "
+                                 "is biased)")
+                    return _fit_exact(recs, layout, mdl, notes)
+                res = dataclasses.replace(res, notes=res.notes + (
+                    f"Whittle leakage index sqrt(N) tau/T = {leak:.2g} > {_LEAKAGE_INDEX_MAX}: "
+                    "the relaxation time is not short compared with the record and the "
+                    "Whittle approximation may bias gamma by a fraction of its SE or more; "
+                    "likelihood='exact' is exact",))
+        return dataclasses.replace(res, notes=(*notes, "likelihood: whittle",
+                                               *res.notes[len(notes):]))
     if method == "psd":
         nb = n_blocks
         if nb is None:
