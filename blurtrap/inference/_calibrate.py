@@ -440,10 +440,12 @@ _LEAKAGE_INDEX_MAX = 0.15
 
 
 def _leakage_index(recs, k_values, gamma):
-    """``max_r sqrt(N_r) tau_r / T_r``: the Whittle likelihood's periodogram leakage bias in
-    units of the standard error scales like this. Measured (benchmarks/RESULTS_calibration.md,
-    8 seeds x 65 536 frames, W = dt): the Whittle-minus-exact shift of gamma is 2.0, 0.7, 0.2,
-    0.08 SE at index 8.5, 2.6, 0.85, 0.26; at <= 0.15 it is below 0.05 SE."""
+    """``max_r sqrt(N_r) tau_r / T_r``: the Whittle likelihood's finite-record bias in units of
+    the standard error scales like this. Measured (benchmarks/study_whittle_leakage.py, results
+    in benchmarks/RESULTS_calibration.md; 8 seeds x 65 536 frames, W = dt, same data for both
+    likelihoods): the mean Whittle-minus-exact shift of gamma is +0.35, +0.61, +0.14, +0.01 SE
+    at index 8.5, 2.6, 0.85, 0.26 (with P_d instead of the exact expected periodogram it was
+    -2.0, -0.7, -0.2, -0.08 SE). Above 0.15 auto uses the exact likelihood."""
     idx = 0.0
     for r, kk in zip(recs, np.broadcast_to(np.asarray(k_values, dtype=float), (len(recs),))):
         tau = gamma / kk
