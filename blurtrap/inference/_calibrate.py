@@ -421,11 +421,22 @@ def _fit_exact(recs, layout, model, notes):
     args = make_exact_args(recs, layout, model)
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
-    scale = _start_vector(recs, layout, model.noise)
-    wout = fit_ml(spectral_nll, scale, sargs)
-    if bool(wout.success):
-        scale = wout.value
-    out = fit_ml_fd_newton(exact_nll, scale, args)
+    moment = _start_vector(recs, layout, model.noise)
+    wout = fit_ml(spectral_nll, moment, sargs)
+    starts = [wout.value] if bool(wout.success) else []
+    names = layout.names
+    if not starts or ("k" in names and _leakage_index(
+            recs, float(wout.value[0]), float(wout.value[names.index("gamma")]))
+            > _LEAKAGE_INDEX_MAX):
+        # where Whittle is unreliable (tau not << T) also start from the closed forms and
+        # keep the better optimum: the exact likelihood can have a second local optimum there
+        starts.append(moment)
+    out = None
+    for s0 in starts:
+        cand = fit_ml_fd_newton(exact_nll, s0, args)
+        if out is None or (bool(cand.converged) and (not bool(out.converged)
+                                                      or float(cand.nll) < float(out.nll))):
+            out = cand
     _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
