@@ -285,6 +285,10 @@ def _slow_relaxation_hint(recs, values, names):
     tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
     dur = min(r.n_frames * float(r.frame_interval) for r in recs)
     if math.isfinite(tau) and tau > dur / 30.0:
+        info = [temporal_information(r) for r in recs]
+        if all(z < 0.5 * math.sqrt(r.n_frames) for r, (_, z) in zip(recs, info)):
+            return f" The fit ran tau = gamma/k to {tau:.3g} s, but " + \
+                _no_temporal_information_message(recs, info)
         return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is not short compared "
                 f"with the record ({dur:.3g} s): the bead diffuses almost freely, so k is not "
                 "identified; record longer or use a stiffer trap.")
@@ -304,6 +308,11 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
         dur = n * float(r.frame_interval)
         tau = g / float(kk)
         if not (tau < dur / 3.0):
+            informative, z = temporal_information(r)
+            if z < 0.5 * math.sqrt(r.n_frames):  # a freely diffusing bead has r1 ~ 1
+                raise FitError(f"{method} fit ran k to {float(kk):.3g} N/m, but the frames are "
+                               "far less correlated than a freely diffusing bead's: "
+                               + _no_temporal_information_message([r], [(informative, z)]))
             what = "record" if block_frames is None else f"block ({n} frames)"
             d = BOLTZMANN * float(r.temperature) / g
             raise FitError(

@@ -153,3 +153,13 @@ def test_batch_bad_n_blocks(n_blocks):
     with pytest.raises(ValueError, match="n_blocks"):
         bt.calibrate_batch(np.zeros((2, 64)) + np.arange(64), frame_interval=DT, exposure=DT,
                            n_blocks=n_blocks)
+
+
+def test_stiff_trap_without_temporal_information_is_not_called_free_diffusion():
+    """k = 1 pN/nm at 1500 fps: dt = 50 tau. An explicit likelihood fit runs k towards 0;
+    the error must name the real cause (no temporal information), not free diffusion."""
+    r = _rec(1e-3, 2048, seed=0)
+    for kw in (dict(method="likelihood", likelihood="exact"), dict(method="psd")):
+        with pytest.raises(FitError, match="cannot identify gamma") as exc:
+            bt.calibrate(r, **kw)
+        assert "diffuses almost freely" not in str(exc.value)
