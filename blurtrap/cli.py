@@ -214,6 +214,20 @@ def _simulate(args) -> int:
 # ------------------------------------------------------------------------------------------
 # calibrate
 # ------------------------------------------------------------------------------------------
+def _check_input_path(path) -> None:
+    """A clear message for paths the loaders cannot take on the command line."""
+    if not path.exists():
+        raise CliError(f"{path}: no such file")
+    if path.is_dir():
+        raise CliError(f"{path} is a directory; give its manifest JSON (e.g. {path}/manifest.json)")
+    if path.suffix.lower() in (".csv", ".txt", ".tsv"):
+        raise CliError(
+            f"{path}: a bare CSV does not say its frame interval, exposure or position unit; "
+            "write a manifest JSON that lists it with those (see README, Data format), or load "
+            "it in Python with blurtrap.load_csv(path, frame_interval=..., exposure=..., "
+            "position_unit=...)")
+
+
 def format_result(result) -> str:
     """A readable lab-unit table of a ``CalibrationResult`` (its ``summary()``)."""
     return result.summary()
@@ -225,8 +239,7 @@ def _calibrate(args) -> int:
     from .inference import calibrate
 
     path = Path(args.manifest)
-    if not path.exists():
-        raise CliError(f"{path}: no such file")
+    _check_input_path(path)
     kw = dict(method=args.method, model=args.model, likelihood=args.likelihood)
     if args.k_mode is not None:
         kw["k"] = args.k_mode
@@ -235,6 +248,9 @@ def _calibrate(args) -> int:
     if args.f_range is not None:
         kw["f_range"] = tuple(args.f_range)
     if args.diffusion is not None:  # calibrate checks that the method uses it
+        if not (0 < args.diffusion <= 1e4):
+            raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
+                           f"be > 0 and plausible (<= 1e4); got {args.diffusion:g}")
         kw["diffusion"] = args.diffusion * 1e-12
     result = calibrate(str(path), **kw)
     post = None
@@ -264,8 +280,7 @@ def _diagnose(args) -> int:
     from .diagnostics import diagnose
 
     path = Path(args.manifest)
-    if not path.exists():
-        raise CliError(f"{path}: no such file")
+    _check_input_path(path)
     d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
     if args.json:
         out = d.to_dict()

@@ -5,6 +5,7 @@ import json
 import math
 import os
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -236,3 +237,52 @@ def test_diagnose_and_posterior_from_the_cli(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     assert res["posterior"]["method"] == "posterior"
     assert res["posterior"]["k"] == pytest.approx(res["k"], rel=0.1)
+
+
+CLI_BAD_INPUTS = [
+    (["calibrate", "{tmp}/empty.json"], "empty"),
+    (["calibrate", "{tmp}/obj.json"], "position_unit"),
+    (["calibrate", "{tmp}/trace.csv"], "bare CSV"),
+    (["calibrate", "{tmp}"], "directory"),
+    (["diagnose", "{tmp}/trace.csv"], "bare CSV"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--method", "psd", "--n-blocks", "0"], "n_blocks"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "2000", "3000"], "Nyquist"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "100", "10"], "f_range"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--method", "equipartition", "--diffusion", "3e5"],
+     "um\\^2/s"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--method", "psd", "--diffusion", "0.3"],
+     "diffusion"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--k-mode", "linear_power"], "laser_power"),
+    (["diagnose", "{tmp}/sim/manifest.json", "--add", "nonsense"], "unknown effect"),
+    (["simulate", "--k", "-1", "--radius", "1", "--exposure-ms", "0.5", "--out", "{tmp}/o"],
+     "--k must be > 0"),
+    (["simulate", "--k", "0.05", "--radius", "-1", "--exposure-ms", "0.5", "--out", "{tmp}/o"],
+     "--radius"),
+    (["simulate", "--k", "0.05", "--radius", "1", "--exposure-ms", "0.5", "--frames", "4",
+      "--out", "{tmp}/o"], "--frames"),
+    (["simulate", "--k", "0.05", "--radius", "1", "--exposure-ms", "0.5", "--fps", "0",
+      "--out", "{tmp}/o"], "--fps"),
+    (["simulate", "--k", "0.05", "0.1", "--radius", "1", "--exposure-ms", "0.5",
+      "--power-mw", "10", "--out", "{tmp}/o"], "--power-mw"),
+]
+
+
+@pytest.fixture(scope="module")
+def bad_input_dir(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli_bad")
+    (tmp / "empty.json").write_text("")
+    (tmp / "obj.json").write_text("{}")
+    (tmp / "trace.csv").write_text("t,x\n0,1\n")
+    assert main(["simulate", "--k", "0.05", "--radius", "0.765", "--exposure-ms", "0.5",
+                 "--frames", "2048", "--out", str(tmp / "sim")]) == 0
+    return tmp
+
+
+@pytest.mark.parametrize("argv,match", CLI_BAD_INPUTS, ids=[" ".join(a[:1] + a[2:])
+                                                            for a, _ in CLI_BAD_INPUTS])
+def test_cli_bad_inputs_give_one_clear_line(bad_input_dir, capsys, argv, match):
+    capsys.readouterr()
+    argv = [a.replace("{tmp}", str(bad_input_dir)) for a in argv]
+    assert main(argv) == 1
+    line = _one_error_line(capsys.readouterr().err, argv[0])
+    assert re.search(match, line), line

@@ -752,6 +752,10 @@ def calibrate(
         use = likelihood
         if use == "auto":
             use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
+            if f_range is not None and use == "exact":
+                use = "whittle"
+                notes.append("f_range given: the Whittle likelihood over that band (the exact "
+                             "likelihood uses every frequency)")
         if use == "exact" and mdl.extra:
             if likelihood == "exact":
                 raise ValueError("the exact time-domain likelihood covers the closed-form "

@@ -163,3 +163,12 @@ def test_stiff_trap_without_temporal_information_is_not_called_free_diffusion():
         with pytest.raises(FitError, match="cannot identify gamma") as exc:
             bt.calibrate(r, **kw)
         assert "diffuses almost freely" not in str(exc.value)
+
+
+def test_f_range_is_never_ignored(rec):
+    """A short record would use the exact likelihood, which has no frequency band: with
+    f_range the Whittle likelihood over that band is used and the note says so."""
+    res = bt.calibrate(rec, f_range=(5.0, 700.0))
+    assert any("f_range given" in n for n in res.notes), res.notes
+    f = res.extras["f"][res.extras["weight"] > 0]
+    assert f.min() >= 5.0 and f.max() <= 700.0
