@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -36,27 +37,98 @@ def _short(text: str, n: int = 60) -> str:
     return repr(text if len(text) <= n else text[:n] + "...")
 
 
-def _read_lines(path: Path) -> list[str]:
-    data = path.read_bytes()
+_BLOCK_BYTES = 1 << 20  # bytes read at a time; blocks always end at a line break
+_BOM = b"\xef\xbb\xbf"
+_TRAILING_BLANKS = re.compile(rb"[ \t]+\n")
+
+
+def _has_lf(path: Path) -> bool:
+    with open(path, "rb") as f:
+        while True:
+            data = f.read(_BLOCK_BYTES)
+            if not data:
+                return False
+            if b"\n" in data:
+                return True
+
+
+def _check_utf8(path: Path, block: bytes, offset: int) -> None:
+    if block.isascii():
+        return
     try:
-        text = data.decode("utf-8-sig")
+        block.decode("utf-8")
     except UnicodeDecodeError as e:
         raise ValueError(
-            f"{path}: not UTF-8 text (undecodable byte {data[e.start : e.start + 1]!r} at byte "
-            f"offset {e.start}); save the file as UTF-8 CSV"
+            f"{path}: not UTF-8 text (undecodable byte {block[e.start : e.start + 1]!r} at byte "
+            f"offset {offset + e.start}); save the file as UTF-8 CSV"
         ) from None
-    if "\n" in text:
-        lines = text.split("\n")
-        lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-    else:
-        lines = text.split("\r")
-    while lines and not lines[-1].strip():  # trailing blank lines carry no data
-        lines.pop()
-    if not lines:
-        raise ValueError(
-            f"{path}: file is empty; expected a header line such as 't_s,x_nm' and data rows"
-        )
-    return lines
+
+
+def _raw_blocks(path: Path):
+    """The file as blocks of whole lines, each line terminated by ``b"\n"``.
+
+    Same lines as splitting the whole decoded text: if the file contains a LF anywhere, lines
+    end at LF and lose one trailing CR (LF and CRLF files); otherwise they end at CR (old Mac
+    files). A UTF-8 BOM at the start is dropped; every block is checked to be UTF-8. Memory
+    is bounded by the block size (plus the longest line).
+    """
+    sep = b"\n" if _has_lf(path) else b"\r"
+    with open(path, "rb") as f:
+        pieces: list[bytes] = []  # a line that continues past the last block read
+        offset = 0  # file offset of the next block
+        first = True
+        while True:
+            data = f.read(max(_BLOCK_BYTES, len(_BOM)) if first else _BLOCK_BYTES)
+            if first:
+                first = False
+                if data.startswith(_BOM):
+                    data, offset = data[len(_BOM) :], len(_BOM)
+                    if not data:
+                        continue
+            if not data:
+                if not pieces:
+                    return
+                block, pieces = b"".join(pieces) + sep, []
+                eof = True
+            else:
+                cut = data.rfind(sep)
+                if cut < 0:
+                    pieces.append(data)
+                    continue
+                block = b"".join(pieces) + data[: cut + 1]
+                pieces = [data[cut + 1 :]] if cut + 1 < len(data) else []
+                eof = False
+            _check_utf8(path, block, offset)
+            offset += len(block)
+            if sep == b"\r":
+                block = block.replace(b"\r", b"\n")
+            elif b"\r" in block:
+                block = block.replace(b"\r\n", b"\n")  # removes one trailing CR per line
+            yield block
+            if eof:
+                return
+
+
+def _is_blank(line: bytes) -> bool:
+    return not line.decode("utf-8").strip()
+
+
+def _line_blocks(path: Path):
+    """:func:`_raw_blocks` without the blank lines at the end of the file (they carry no
+    data); blank lines followed by more text are kept (and are bad rows)."""
+    pending = b""
+    for block in _raw_blocks(path):
+        if pending:
+            block = pending + block
+        end = len(block)
+        while end > 0:
+            start = block.rfind(b"\n", 0, end - 1) + 1
+            if not _is_blank(block[start : end - 1]):
+                break
+            end = start
+        pending = block[end:]
+        if end:
+            yield block[:end] if pending else block
 
 
 def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
@@ -96,61 +168,185 @@ def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
     return has_time, xcol, unit, px
 
 
-def _parse_rows(path, lines, has_time, xcol, unit, pixel_size, on_bad_rows):
-    ncols = 2 if has_time else 1
-    p = decimal_exponent(unit)
-    p_pos = 0 if p is None else p
-    colnames = [TIME_COLUMN, xcol] if has_time else [xcol]
-    scales = (0, p_pos) if has_time else (p_pos,)  # decimal exponents: t_s is already SI
-    times: list[float] = []
-    pos: list[float] = []
-    excluded: list[tuple[int, str]] = []
-    prev_t, prev_line, prev_cell = -math.inf, 0, ""
-    for lineno in range(2, len(lines) + 1):
-        line = lines[lineno - 1]
-        fields = line.split(",")
-        problem = None
-        if len(fields) != ncols:
-            problem = (
-                f"expected {ncols} field(s) ({','.join(colnames)}), got {len(fields)}: "
-                f"{_short(line)}"
-            )
+class _RowParser:
+    """Parses the data lines of a CSV block by block (streaming, bounded memory).
+
+    Each block goes through a vectorised fast path (``np.fromstring`` of the whole block,
+    correctly rounded like ``float``) when it is plain ASCII, every line has the expected
+    number of fields, no position cell has an exponent (positions in mm/um/nm get the decimal
+    exponent appended as text, so the scaling stays exact), all values are finite and the time
+    stamps increase. Anything else is parsed line by line by :meth:`_slow`, which reports or
+    excludes the bad rows; both paths give the same float64 bits for the same text.
+    """
+
+    def __init__(self, path, has_time, xcol, unit, on_bad_rows):
+        self.path = path
+        self.has_time = has_time
+        self.ncols = 2 if has_time else 1
+        p = decimal_exponent(unit)
+        self.p_pos = 0 if p is None else p
+        self.colnames = [TIME_COLUMN, xcol] if has_time else [xcol]
+        self.scales = (0, self.p_pos) if has_time else (self.p_pos,)  # t_s is already SI
+        self.suffix = f"e-{self.p_pos}".encode() if self.p_pos else b""
+        self.on_bad_rows = on_bad_rows
+        self.lineno = 2  # line number of the next data line (the header is line 1)
+        self.prev_t, self.prev_line, self.prev_cell = -math.inf, 0, ""
+        self.times: list[np.ndarray] = []
+        self.positions: list[np.ndarray] = []
+        self.excluded: list[tuple[int, str]] = []
+
+    @property
+    def n_lines(self) -> int:
+        return self.lineno - 2
+
+    def feed(self, block: bytes) -> None:
+        n = block.count(b"\n")
+        if not self._fast(block, n):
+            self._slow(block.decode("utf-8").split("\n")[:-1])
+        self.lineno += n
+
+    def result(self):
+        """``(times or None, positions, excluded)``; the per-block parts are released one
+        column at a time, so the peak is the output plus one column."""
+        times = None
+        if self.has_time:
+            times = np.concatenate(self.times) if self.times else np.zeros(0)
+            self.times.clear()
+        pos = np.concatenate(self.positions) if self.positions else np.zeros(0)
+        self.positions.clear()
+        return times, pos, self.excluded
+
+    # -- vectorised path ------------------------------------------------------------------
+    def _fast(self, block: bytes, n: int) -> bool:
+        if not block.isascii() or b"\r" in block:
+            return False
+        if b" \n" in block or b"\t\n" in block:
+            block = _TRAILING_BLANKS.sub(b"\n", block)
+        arr = np.frombuffer(block, dtype=np.uint8)
+        if np.any((arr < 32) & (arr != 10) & (arr != 9)):
+            return False  # control characters: the line-by-line parser reports them
+        nl = np.flatnonzero(arr == 10)
+        if self.ncols == 2:
+            cm = np.flatnonzero(arr == 44)
+            # exactly one comma on every line
+            if cm.size != n or np.any(cm > nl) or np.any(cm[1:] < nl[:-1]):
+                return False
+            ends = np.flatnonzero((arr == 44) | (arr == 10))
+        elif b"," in block:
+            return False
         else:
-            values = []
-            for col, cell, scale_p in zip(colnames, fields, scales, strict=True):
-                v = parse_number(cell, scale_p)
-                if v is None:
-                    try:
-                        special = float(cell)
-                    except ValueError:
-                        special = None
-                    if special is not None and not math.isfinite(special):
-                        problem = f"non-finite value {cell.strip()!r} (NaN/inf) in column {col}"
-                    else:
-                        problem = f"non-numeric value {_short(cell)} in column {col}"
-                    break
-                if not math.isfinite(v):
-                    problem = f"value {cell.strip()!r} in column {col} overflows float64"
-                    break
-                values.append(v)
-            if problem is None and has_time and values[0] <= prev_t:
+            ends = nl
+        # every cell must hold a non-blank character (np.fromstring reads a blank cell as -1)
+        starts = np.empty_like(ends)
+        starts[0] = 0
+        starts[1:] = ends[:-1] + 1
+        if np.any(starts == ends):
+            return False
+        filled = np.cumsum((arr != 32) & (arr != 9), dtype=np.intp)
+        before = np.where(starts > 0, filled[starts - 1], 0)
+        if np.any(filled[ends - 1] == before):
+            return False
+        if self.suffix:
+            e_at = np.flatnonzero((arr | 32) == 101)  # 'e' or 'E'
+            if e_at.size and (self.ncols == 1 or np.any(e_at > cm[np.searchsorted(nl, e_at)])):
+                return False  # an exponent in a position cell: scaled by the exact slow path
+            text = block.replace(b"\n", self.suffix + b",")
+        else:
+            text = block.replace(b"\n", b",")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                vals = np.fromstring(text, dtype=np.float64, sep=",")
+        except (ValueError, DeprecationWarning):
+            return False
+        if vals.size != n * self.ncols or not np.all(np.isfinite(vals)):
+            return False
+        vals = vals.reshape(n, self.ncols)
+        if self.has_time:
+            t = vals[:, 0]
+            if not (t[0] > self.prev_t and np.all(t[1:] > t[:-1])):
+                return False
+            last = block[(nl[-2] + 1 if n > 1 else 0) : cm[-1]]
+            self.prev_t, self.prev_line = float(t[-1]), self.lineno + n - 1
+            self.prev_cell = last.decode("ascii").strip()
+            self.times.append(t.copy())
+        self.positions.append(vals[:, -1].copy())
+        return True
+
+    # -- line by line: exact error reports ------------------------------------------------
+    def _slow(self, lines: list[str]) -> None:
+        ncols, colnames = self.ncols, self.colnames
+        times: list[float] = []
+        pos: list[float] = []
+        for lineno, line in enumerate(lines, start=self.lineno):
+            fields = line.split(",")
+            problem = None
+            if len(fields) != ncols:
                 problem = (
-                    f"time stamp {TIME_COLUMN} = {fields[0].strip()!r} is not after the previous "
-                    f"one ({prev_cell!r}, line {prev_line}); time stamps must strictly increase"
+                    f"expected {ncols} field(s) ({','.join(colnames)}), got {len(fields)}: "
+                    f"{_short(line)}"
                 )
-        if problem is not None:
-            if on_bad_rows == "error":
-                raise ValueError(f"{path}, line {lineno}: {problem}")
-            excluded.append((lineno, problem))
-            continue
-        if has_time:
-            prev_t, prev_line, prev_cell = values[0], lineno, fields[0].strip()
-            times.append(values[0])
-        pos.append(values[-1])
-    positions = np.array(pos, dtype=np.float64)
-    if p is None:
-        positions = positions * pixel_size
-    return (np.array(times, dtype=np.float64) if has_time else None), positions, excluded
+            else:
+                values = []
+                for col, cell, scale_p in zip(colnames, fields, self.scales, strict=True):
+                    v = parse_number(cell, scale_p)
+                    if v is None:
+                        try:
+                            special = float(cell)
+                        except ValueError:
+                            special = None
+                        if special is not None and not math.isfinite(special):
+                            problem = f"non-finite value {cell.strip()!r} (NaN/inf) in column {col}"
+                        else:
+                            problem = f"non-numeric value {_short(cell)} in column {col}"
+                        break
+                    if not math.isfinite(v):
+                        problem = f"value {cell.strip()!r} in column {col} overflows float64"
+                        break
+                    values.append(v)
+                if problem is None and self.has_time and values[0] <= self.prev_t:
+                    problem = (
+                        f"time stamp {TIME_COLUMN} = {fields[0].strip()!r} is not after the "
+                        f"previous one ({self.prev_cell!r}, line {self.prev_line}); time stamps "
+                        "must strictly increase"
+                    )
+            if problem is not None:
+                if self.on_bad_rows == "error":
+                    raise ValueError(f"{self.path}, line {lineno}: {problem}")
+                self.excluded.append((lineno, problem))
+                continue
+            if self.has_time:
+                self.prev_t, self.prev_line, self.prev_cell = values[0], lineno, fields[0].strip()
+                times.append(values[0])
+            pos.append(values[-1])
+        if self.has_time:
+            self.times.append(np.array(times, dtype=np.float64))
+        self.positions.append(np.array(pos, dtype=np.float64))
+
+
+def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
+    """Stream ``path``: header checks, then the rows block by block.
+
+    Returns ``(times or None, positions [m], excluded rows, number of data lines, unit)``."""
+    blocks = _line_blocks(path)
+    first = next(blocks, None)
+    if first is None:
+        raise ValueError(
+            f"{path}: file is empty; expected a header line such as 't_s,x_nm' and data rows"
+        )
+    cut = first.index(b"\n")
+    header = first[:cut].decode("utf-8")
+    has_time, xcol, unit, px = _parse_header(path, header, position_unit, pixel_size_m)
+    parser = _RowParser(path, has_time, xcol, unit, on_bad_rows)
+    if cut + 1 < len(first):
+        parser.feed(first[cut + 1 :])
+    del first
+    for block in blocks:
+        parser.feed(block)
+    times, positions, excluded = parser.result()
+    if decimal_exponent(unit) is None:
+        positions = positions * px
+    return times, positions, excluded, parser.n_lines, unit
 
 
 def infer_frame_interval(times: np.ndarray, tol: float = DEFAULT_TIMING_TOLERANCE) -> float:
@@ -203,10 +399,9 @@ def load_csv(
     path = Path(os.fspath(path))
     if on_bad_rows not in _ON_BAD_ROWS:
         raise ValueError(f"on_bad_rows must be one of {_ON_BAD_ROWS}; got {on_bad_rows!r}")
-    lines = _read_lines(path)
-    has_time, xcol, unit, px = _parse_header(path, lines[0], position_unit, pixel_size_m)
-    times, positions, excluded = _parse_rows(path, lines, has_time, xcol, unit, px, on_bad_rows)
-    n_data = len(lines) - 1
+    times, positions, excluded, n_data, unit = _read_csv(
+        path, position_unit, pixel_size_m, on_bad_rows
+    )
     if positions.shape[0] == 0:
         detail = f" ({len(excluded)} bad row(s) excluded)" if excluded else ""
         raise ValueError(f"{path}: no data rows after the header{detail}")

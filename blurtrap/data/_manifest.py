@@ -51,6 +51,25 @@ def _plain(obj):
     return obj
 
 
+class _DuplicateKey(Exception):
+    pass
+
+
+def _no_duplicates(pairs):
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k, [key for key, _ in pairs])
+        out[k] = v
+    return out
+
+
+def _flag(where: str, key: str, value) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"{where}: {key} must be true or false (a JSON boolean); got {value!r}")
+    return value
+
+
 def _number(where: str, key: str, value, scale_exp: int = 0) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, Decimal, float)):
         raise ValueError(f"{where}: {key} must be a number; got {value!r}")
@@ -80,11 +99,20 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
     if not text.strip():
         raise ValueError(f"{path}: manifest file is empty")
     try:
-        doc = json.loads(text, parse_float=Decimal)
+        doc = json.loads(text, parse_float=Decimal, object_pairs_hook=_no_duplicates)
     except json.JSONDecodeError as e:
         raise ValueError(
             f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}"
         ) from None
+    except _DuplicateKey as e:
+        raise ValueError(
+            f"{path}: key {e.args[0]!r} appears twice in one JSON object (in the object with "
+            f"keys {e.args[1]}); each setting must be given once"
+        ) from None
+    except RecursionError:
+        raise ValueError(f"{path}: invalid JSON (nested too deeply)") from None
+    except ValueError as e:  # e.g. integers longer than Python's digit limit
+        raise ValueError(f"{path}: invalid JSON ({e})") from None
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: the manifest must be a JSON object with 'recordings'")
     unknown = sorted(set(doc) - set(_TOP_KEYS))
@@ -92,14 +120,12 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         raise ValueError(f"{path}: unknown top-level key(s) {unknown}; allowed: {list(_TOP_KEYS)}")
     if "position_unit" not in doc:
         raise ValueError(f'{path}: \'position_unit\' is missing (e.g. "position_unit": "nm")')
+    px_given = (
+        None if "pixel_size_m" not in doc else _number(str(path), "pixel_size_m", doc["pixel_size_m"])
+    )
     try:
         unit = canonical_unit(doc["position_unit"])
-        px = check_pixel_size(
-            unit,
-            None
-            if "pixel_size_m" not in doc
-            else _number(str(path), "pixel_size_m", doc["pixel_size_m"]),
-        )
+        px = check_pixel_size(unit, px_given)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
     entries = doc.get("recordings")
@@ -120,8 +146,13 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         if not isinstance(e["file"], str) or not e["file"]:
             raise ValueError(f"{where}: 'file' must be a file name; got {e['file']!r}")
         csv_path = path.parent / e["file"]
-        where = f"{where} ({e['file']})"
-        if not csv_path.is_file():
+        shown = e["file"] if len(e["file"]) <= 80 else e["file"][:77] + "..."
+        where = f"{where} ({shown})"
+        try:
+            found = csv_path.is_file()
+        except (OSError, ValueError) as err:  # e.g. a name too long for the file system
+            raise ValueError(f"{where}: cannot use this file name ({err})") from None
+        if not found:
             raise FileNotFoundError(f"{where}: file not found: {csv_path}")
         kw = {}
         defaults = {}
@@ -143,6 +174,11 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         if defaults:
             meta["defaults_applied"] = defaults
         name = e.get("name", Path(e["file"]).stem)
+        kw["allow_irregular"] = _flag(where, "allow_irregular", e.get("allow_irregular", False))
+        kw["check_units"] = _flag(where, "check_units", e.get("check_units", True))
+        kw["timing_tolerance"] = _number(
+            where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))
+        )
         try:
             recs.append(
                 load_csv(
@@ -152,13 +188,6 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
                     on_bad_rows=on_bad_rows,
                     name=name,
                     metadata=meta,
-                    allow_irregular=bool(e.get("allow_irregular", False)),
-                    timing_tolerance=_number(
-                        where,
-                        "timing_tolerance",
-                        e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE))),
-                    ),
-                    check_units=bool(e.get("check_units", True)),
                     **kw,
                 )
             )
@@ -220,8 +249,8 @@ def save_manifest(
             token = f"@@DECIMAL{i}@@"
             decimals[token] = decimal_text(Decimal(repr(r.laser_power)).scaleb(3))
             entry["laser_power_mW"] = token
-        if r.name is not None:
-            entry["name"] = r.name
+        # always written: a missing name would come back as the file stem (null stays None)
+        entry["name"] = r.name
         meta = {k: v for k, v in thaw(r.metadata).items() if k not in _LOADER_KEYS + ("manifest",)}
         if meta:
             entry["metadata"] = meta

@@ -79,7 +79,10 @@ def load_npz(
     """
     path = Path(os.fspath(path))
     try:
-        with np.load(path, allow_pickle=False) as z:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy array
+            raise ValueError(f"it holds a single {type(loaded).__name__}, not named arrays")
+        with loaded as z:
             data = {k: z[k] for k in z.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
         if isinstance(e, FileNotFoundError):
@@ -93,36 +96,69 @@ def load_npz(
         raise ValueError(f"{path}: {e}") from None
 
 
+_ENTRY_KEYS = ("frame_interval", "exposure", "temperature", "laser_power", "name", "metadata",
+               "allow_irregular", "timing_tolerance", "check_units", "has_times")
+
+
 def _from_blurtrap(data):
+    raw = data[_HEADER_KEY]
     try:
-        header = json.loads(str(data[_HEADER_KEY]))
-    except json.JSONDecodeError as e:
+        if raw.ndim != 0 or raw.dtype.kind != "U":
+            raise ValueError(f"expected a 0-d text array; got dtype {raw.dtype}, shape {raw.shape}")
+        header = json.loads(str(raw))
+    except (ValueError, RecursionError) as e:  # JSONDecodeError is a ValueError
         raise ValueError(f"corrupt {_HEADER_KEY} header ({e})") from None
+    if not isinstance(header, dict):
+        raise ValueError(f"corrupt {_HEADER_KEY} header: expected a JSON object; got {header!r:.60}")
     if header.get("format") != _FORMAT or header.get("version") != _VERSION:
         raise ValueError(
             f"unsupported header format {header.get('format')!r} version "
             f"{header.get('version')!r}; expected {_FORMAT!r} version {_VERSION}"
         )
-    recs = []
-    for i, e in enumerate(header["recordings"]):
-        if f"positions_{i}" not in data:
-            raise ValueError(f"array positions_{i} is missing")
-        recs.append(
-            Recording(
-                data[f"positions_{i}"],
-                frame_interval=e["frame_interval"],
-                exposure=e["exposure"],
-                temperature=e["temperature"],
-                times=data[f"times_{i}"] if e["has_times"] else None,
-                laser_power=e["laser_power"],
-                metadata=e["metadata"],
-                name=e["name"],
-                allow_irregular=e["allow_irregular"],
-                timing_tolerance=e["timing_tolerance"],
-                check_units=e["check_units"],
-            )
+    kind, entries = header.get("kind"), header.get("recordings")
+    if kind not in ("recording", "set"):
+        raise ValueError(f"corrupt {_HEADER_KEY} header: kind = {kind!r}; expected 'recording' or 'set'")
+    if not isinstance(entries, list) or not entries or (kind == "recording" and len(entries) != 1):
+        raise ValueError(
+            f"corrupt {_HEADER_KEY} header: 'recordings' must list the recordings (exactly one "
+            f"for kind 'recording'); got {entries!r:.60}"
         )
-    if header["kind"] == "recording":
+    recs = []
+    for i, e in enumerate(entries):
+        if not isinstance(e, dict):
+            raise ValueError(f"corrupt {_HEADER_KEY} header: recordings[{i}] is not an object")
+        missing = [k for k in _ENTRY_KEYS if k not in e]
+        if missing:
+            raise ValueError(f"corrupt {_HEADER_KEY} header: recordings[{i}] lacks {missing}")
+        for flag in ("has_times", "allow_irregular", "check_units"):
+            if not isinstance(e[flag], bool):
+                raise ValueError(
+                    f"corrupt {_HEADER_KEY} header: recordings[{i}].{flag} = {e[flag]!r} is not "
+                    "true/false"
+                )
+        needed = [f"positions_{i}"] + ([f"times_{i}"] if e["has_times"] else [])
+        absent = [a for a in needed if a not in data]
+        if absent:
+            raise ValueError(f"array(s) {absent} missing (named in the {_HEADER_KEY} header)")
+        try:
+            recs.append(
+                Recording(
+                    data[f"positions_{i}"],
+                    frame_interval=e["frame_interval"],
+                    exposure=e["exposure"],
+                    temperature=e["temperature"],
+                    times=data[f"times_{i}"] if e["has_times"] else None,
+                    laser_power=e["laser_power"],
+                    metadata=e["metadata"],
+                    name=e["name"],
+                    allow_irregular=e["allow_irregular"],
+                    timing_tolerance=e["timing_tolerance"],
+                    check_units=e["check_units"],
+                )
+            )
+        except ValueError as err:
+            raise ValueError(f"recording {i}: {err}") from None
+    if kind == "recording":
         return recs[0]
     return RecordingSet(recs)
 

@@ -127,8 +127,8 @@ def _positions(positions, check_units: bool) -> tuple[np.ndarray, str | None]:
             f"positions is constant (zero variance; every value = {float(arr[0])!r}): a trapped "
             "bead always fluctuates, so this is not a position trace"
         )
-    std = float(np.std(arr))
-    if check_units and std > _MAX_PLAUSIBLE_POSITION_STD_M:
+    std = float(np.std(arr)) if check_units else 0.0  # (no overflow for |x| > 1e154 unchecked)
+    if std > _MAX_PLAUSIBLE_POSITION_STD_M:
         raise ValueError(
             f"positions have standard deviation {_g(std)} m, larger than 1 mm: positions look "
             "like nm or pixels, not metres. Convert to metres (e.g. from_arrays(..., "
@@ -164,26 +164,39 @@ def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: b
             f"times must be strictly increasing; times[{i}] = {float(t[i])!r} s is not after "
             f"times[{i - 1}] = {float(t[i - 1])!r} s ({nonincr.size} non-increasing step(s) in all)"
         )
-    med = float(np.median(d))
+    d_max, d_min = float(d.max()), float(d.min())
+    h = d.size // 2  # np.median(d) without another copy (d is a temporary)
+    if d.size % 2:
+        d.partition(h)
+        med = float(d[h])
+    else:
+        d.partition((h - 1, h))
+        med = float(np.mean(d[h - 1 : h + 1]))
+    del d
     if abs(med - frame_interval) > tol * frame_interval:
         raise ValueError(
             f"times imply a frame interval of {_g(med)} s (median step) but frame_interval = "
             f"{_g(frame_interval)} s; they differ by more than timing_tolerance = {tol:g} "
             "(relative). Check the units of both (seconds)"
         )
-    # deviation from the least-squares regular grid t0 + i * dt
-    i = np.arange(n, dtype=np.float64)
-    ic = i - i.mean()
-    slope = float(np.dot(ic, t - t.mean()) / np.dot(ic, ic))
-    resid = (t - t.mean()) - slope * ic
-    jitter = TimingJitter(float(np.std(resid)), float(np.max(np.abs(resid))), slope)
+    # deviation from the least-squares regular grid t0 + i * dt (in place: long records
+    # are validated with a few temporaries of their own size)
+    ic = np.arange(n, dtype=np.float64)
+    ic -= ic.mean()
+    resid = t - t.mean()
+    slope = float(np.dot(ic, resid) / np.dot(ic, ic))
+    ic *= slope
+    resid -= ic
+    del ic
+    max_dev = max(float(resid.max()), -float(resid.min()))
+    jitter = TimingJitter(float(np.std(resid)), max_dev, slope)
     if jitter.max_deviation > tol * frame_interval and not allow_irregular:
         k = int(np.argmax(np.abs(resid)))
         raise ValueError(
             f"times are irregular: deviation from a regular grid has std {_g(jitter.std)} s "
             f"and max {_g(jitter.max_deviation)} s (at times[{k}] = {float(t[k])!r}), i.e. "
             f"{_g(jitter.max_deviation / frame_interval)} frame intervals > timing_tolerance "
-            f"= {tol:g}. Largest step {_g(d.max())} s, smallest {_g(d.min())} s (dropped "
+            f"= {tol:g}. Largest step {_g(d_max)} s, smallest {_g(d_min)} s (dropped "
             "frames?). Pass allow_irregular=True to keep them (reported in timing_jitter)"
         )
     return t, jitter
@@ -294,6 +307,10 @@ class Recording:
         if name is not None and not isinstance(name, str):
             raise ValueError(f"name must be a str or None; got {name!r}")
 
+        if metadata is not None and not isinstance(metadata, (dict, types.MappingProxyType)):
+            raise ValueError(
+                f"metadata must be a dict (or None); got {type(metadata).__name__} {metadata!r:.60}"
+            )
         meta = dict(_freeze({} if metadata is None else metadata))
         if dtype_note is not None:
             meta.setdefault("input_dtype", dtype_note)

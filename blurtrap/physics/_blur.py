@@ -102,7 +102,9 @@ def blur_factor(alpha):
 
     The ratio var(X_m)/var(X) for a rectangular exposure of length W = alpha * tau.
     Numerically stable for all alpha >= 0 in float32 and float64 (Taylor series below
-    alpha = 0.5, ``expm1`` form above), ``S(0) = 1``, ``S -> 2/alpha`` for large alpha;
+    alpha = 0.1 in float64 and 1.0 in lower precision, ``expm1`` form above; relative error
+    below ~1e-14 in float64, largest just above the cut, where the closed form loses ~40 ulp
+    to cancellation), ``S(0) = 1``, ``S -> 2/alpha`` for large alpha;
     gradients are finite everywhere including alpha = 0 (``dS/dalpha(0) = -1/3``).
 
     **Arguments:**

@@ -18,9 +18,25 @@ def is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
-def as_float(x):
-    """``jnp.asarray`` that promotes integers/bools to the default float dtype."""
+def as_float(x, name: str | None = None):
+    """``jnp.asarray`` that promotes integers/bools to the default float dtype.
+
+    With ``name``, non-numeric or complex input raises naming the parameter."""
+    if name is not None and not isinstance(x, jax.Array):
+        try:
+            kind = np.asarray(x).dtype.kind
+        except (TypeError, ValueError):  # ragged or exotic input
+            kind = "O"
+        if kind not in "biufc":
+            raise TypeError(
+                f"{name} must be a real number or array of numbers; got {type(x).__name__} "
+                f"{x!r:.60}"
+            )
     x = jnp.asarray(x)
+    if jnp.issubdtype(x.dtype, jnp.complexfloating):
+        if name is None:
+            raise TypeError(f"expected real values; got dtype {x.dtype}")
+        raise TypeError(f"{name} must be real; got complex dtype {x.dtype}")
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(jnp.result_type(float))
     return x
@@ -39,7 +55,7 @@ def _bad(arr, ok):
 
 
 def check_finite(name: str, x, unit: str = ""):
-    x = as_float(x)
+    x = as_float(x, name)
     if is_concrete(x):
         arr = np.asarray(x)
         ok = np.isfinite(arr)
@@ -53,7 +69,7 @@ def check_finite(name: str, x, unit: str = ""):
 
 def check_positive(name: str, x, unit: str = "", *, what: str = ""):
     """``x > 0`` and finite."""
-    x = as_float(x)
+    x = as_float(x, name)
     desc = f" ({what})" if what else ""
     u = f" {unit}" if unit else ""
     if is_concrete(x):
@@ -69,7 +85,7 @@ def check_positive(name: str, x, unit: str = "", *, what: str = ""):
 
 def check_nonnegative(name: str, x, unit: str = "", *, what: str = ""):
     """``x >= 0`` and finite."""
-    x = as_float(x)
+    x = as_float(x, name)
     desc = f" ({what})" if what else ""
     u = f" {unit}" if unit else ""
     if is_concrete(x):
@@ -97,3 +113,39 @@ def check_exposure_le_interval(exposure, frame_interval):
     return eqx.error_if(
         exposure, exposure > frame_interval * (1 + 1e-12), "exposure must be <= frame_interval"
     )
+
+
+def check_integer(name: str, x, *, what: str = ""):
+    """Integer-valued (any integer dtype, or a float holding a finite whole number)."""
+    if not isinstance(x, jax.Array):
+        try:
+            kind = np.asarray(x).dtype.kind
+        except (TypeError, ValueError):
+            kind = "O"
+        if kind not in "biuf":
+            raise TypeError(f"{name} must be an integer or array of integers; got {x!r:.60}")
+    x = jnp.asarray(x)
+    if jnp.issubdtype(x.dtype, jnp.integer) or x.dtype == jnp.bool_:
+        return x
+    desc = f" ({what})" if what else ""
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        raise ValueError(f"{name}{desc} must be an integer; got dtype {x.dtype}")
+    if is_concrete(x):
+        arr = np.asarray(x)
+        ok = np.isfinite(arr) & (arr == np.round(arr))
+        if not ok.all():
+            raise ValueError(f"{name}{desc} must be an integer; got {name} = {_fmt(_bad(arr, ok))}")
+        return x
+    return eqx.error_if(x, ~(jnp.isfinite(x) & (x == jnp.round(x))), f"{name}{desc} must be an integer")
+
+
+def check_count(name: str, n, minimum: int = 0, *, allowed: str = "") -> int:
+    """A static (Python) integer >= minimum (0 or 1), e.g. a number of terms or panels."""
+    try:
+        ok = not isinstance(n, bool) and int(n) == n and int(n) >= minimum
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        kind = "a non-negative integer" if minimum == 0 else f"an integer >= {minimum}"
+        raise ValueError(f"{name} must be {kind}{allowed}; got {name} = {n!r}")
+    return int(n)

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._checks import as_float, check_nonnegative, check_positive
+from ._checks import as_float, check_count, check_finite, check_nonnegative, check_positive
 from ._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 
@@ -114,6 +114,14 @@ class ProductKernel(AbstractKernel):
         return jnp.min(jnp.stack([jnp.asarray(k.width()) for k in self.kernels]))
 
 
+def _check_kernel(kernel):
+    if not isinstance(kernel, AbstractKernel):
+        raise TypeError(
+            f"kernel must be a detection kernel (RectKernel, TrapezoidKernel, ExponentialKernel, "
+            f"ProductKernel); got {type(kernel).__name__}"
+        )
+
+
 def _gauss_legendre(n):
     x, w = np.polynomial.legendre.leggauss(n)
     return x, w
@@ -139,7 +147,15 @@ def variance_general(
     is below ``sigma2 (2/pi) f_c/f_max max_{f>f_max}|H|^2``.
 
     **Returns:** var [m^2] (without tracking noise).
+
+    **Raises:** ``TypeError`` if `kernel` is not an :class:`AbstractKernel`; ``ValueError`` for
+    non-positive parameters or panel/node counts.
     """
+    _check_kernel(kernel)
+    n_lorentz_panels = check_count("n_lorentz_panels", n_lorentz_panels, 1)
+    n_linear_panels = check_count("n_linear_panels", n_linear_panels, 1)
+    n_nodes = check_count("n_nodes", n_nodes, 1)
+    periods = check_positive("periods", periods, what="kernel periods integrated")
     k = check_positive("k", k, "N/m", what="trap stiffness")
     gamma = check_positive("gamma", gamma, "N s/m", what="friction coefficient")
     t = check_positive("temperature", temperature, "K")
@@ -177,8 +193,13 @@ def psd_folded(
     $$P_d(f) = \sum_{|n|\le N} P(f + n f_s)\,|H(f + n f_s)|^2 + \varepsilon^2 \Delta t.$$
 
     For a sinc^2-like kernel the truncation error falls as ``N^-3``.
+
+    **Raises:** ``TypeError`` if `kernel` is not an :class:`AbstractKernel`; ``ValueError`` for
+    a non-finite `f`, parameters out of range or a negative `n_alias`.
     """
-    f = as_float(f)
+    _check_kernel(kernel)
+    n_alias = check_count("n_alias", n_alias, 0)
+    f = check_finite("f", f, "Hz")
     k = check_positive("k", k, "N/m", what="trap stiffness")
     gamma = check_positive("gamma", gamma, "N s/m", what="friction coefficient")
     t = check_positive("temperature", temperature, "K")

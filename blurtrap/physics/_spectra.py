@@ -14,9 +14,10 @@ import jax.numpy as jnp
 
 from ._blur import _blur_factor, _rho_b, _rho_b_minus_s
 from ._checks import (
-    as_float,
+    check_count,
     check_exposure_le_interval,
     check_finite,
+    check_integer,
     check_nonnegative,
     check_positive,
     is_concrete,
@@ -47,8 +48,14 @@ def lorentzian(f, k, gamma, temperature=DEFAULT_TEMPERATURE):
 
 
 def transfer_rect(f, exposure):
-    r"""``|H(f)|^2 = sinc^2(pi f W)`` of a rectangular exposure of length W [s]."""
-    return jnp.sinc(as_float(f) * as_float(exposure)) ** 2
+    r"""``|H(f)|^2 = sinc^2(pi f W)`` of a rectangular exposure of length W [s].
+
+    **Raises:** ``ValueError`` if a concrete `f` [Hz] is not finite or `exposure` [s] is not
+    finite and > 0.
+    """
+    f = check_finite("f", f, "Hz")
+    w = check_positive("exposure", exposure, "s", what="exposure time W")
+    return jnp.sinc(f * w) ** 2
 
 
 def _psd_coeffs(sigma2, tau, w, dt, eps2):
@@ -71,30 +78,46 @@ def _psd_from_coeffs(f, coeffs):
     return dt * ((c_a - s2 * c_b) / (one_m_rho**2 + 4.0 * rho * s2) + eps2)
 
 
-def _expected_block_periodogram(f, block_len, sigma2, tau, w, dt, eps2):
-    """Exact expectation of the periodogram of a block of M frames at Fourier frequencies
+def _expected_block_periodogram(f, block_len, sigma2, tau, w, dt, eps2, *, s2=None):
+    r"""Exact expectation of the periodogram of a block of M frames at Fourier frequencies
     f = j/(M dt), j = 1..M/2 (block mean removed, which only affects j = 0):
 
     E[I_j] = dt [C(0) + 2 Re sum_{n=1}^{M-1} (1 - n/M) C(n) e^{-i theta n}],  theta = 2 pi f dt,
 
-    summed in closed form for C(n) = C(1) rho^(n-1): with q = rho e^{-i theta} and q^M = rho^M,
-    sum q^n = (q - rho^M)/(1 - q) and sum n q^n = (q - M rho^M + (M-1) rho^M q)/(1 - q)^2.
-    Unlike P_d(f) it contains the Fejer-kernel leakage of a finite block exactly.
+    summed in closed form for C(n) = C(1) rho^(n-1). The geometric sums in q = rho e^{-i theta}
+    (with q^M = rho^M at Fourier frequencies) have a real part that is rational in
+    s = sin^2(theta/2): with cos theta = 1 - 2 s, |1 - q|^2 = D = (1-rho)^2 + 4 rho s and
+    R = rho^(M-1),
+
+    Re sum_{n<M} (1 - n/M) rho^(n-1) e^{-i theta n} = [N_1 - N_2/(M D)] / D,
+    N_1 = (1-rho)(1-R) - 2 s (1 + R rho),
+    N_2 = Delta (1-rho)^2 - 2 [M R (1-rho)(1 + 3 rho) + Delta (1 + rho^2)] s - 8 M R rho^2 s^2,
+    Delta = (1 - R) - (M-1) R (1-rho)  (>= 0)
+
+    (the real part of the complex closed form, expanded and arranged so that no two large
+    terms cancel; no complex arithmetic, and no trigonometric function when ``s2`` =
+    sin^2(pi f dt) is given). Unlike P_d(f) it contains the Fejer-kernel leakage of a finite
+    block exactly; for M -> inf it tends to P_d(f).
     """
     a = w / tau
     r = dt / tau
     c0 = sigma2 * _blur_factor(a) + eps2
     c1 = sigma2 * _rho_b(a, r)
-    rho = jnp.exp(-r)
     m = block_len
-    th = 2.0 * jnp.pi * f * dt
-    q = rho * jnp.exp(-1j * th)
-    rho_m = jnp.exp(-r * m)
-    one_m_q = 1.0 - q
-    s1 = (q - rho_m) / one_m_q
-    s2 = (q - m * rho_m + (m - 1.0) * rho_m * q) / one_m_q**2
-    tot = (s1 - s2 / m) / rho
-    return dt * (c0 + 2.0 * c1 * jnp.real(tot))
+    s = jnp.sin(jnp.pi * f * dt) ** 2 if s2 is None else s2
+    rho = jnp.exp(-r)
+    omr = -jnp.expm1(-r)
+    rm1 = jnp.exp(-r * (m - 1.0))  # R = rho^(M-1), no 0/0 when rho underflows (dt >> tau)
+    omrm1 = -jnp.expm1(-r * (m - 1.0))  # 1 - R
+    mr = m * rm1
+    delta = omrm1 - (m - 1.0) * rm1 * omr
+    d = omr * omr + 4.0 * rho * s
+    n1 = omr * omrm1 - 2.0 * (1.0 + rm1 * rho) * s
+    n2 = (delta * (omr * omr)
+          - 2.0 * (mr * omr * (1.0 + 3.0 * rho) + delta * (1.0 + rho * rho)) * s
+          - 8.0 * mr * rho * rho * s * s)
+    tot = (n1 - n2 / (m * d)) / d
+    return dt * (c0 + 2.0 * c1 * tot)
 
 
 def _psd_discrete(f, sigma2, tau, w, dt, eps2):
@@ -163,10 +186,9 @@ def psd_measured(
     w = check_exposure_le_interval(w, dt)
     if n_alias is None:
         return _psd_discrete(f, sigma2, tau, w, dt, eps2)
-    if int(n_alias) != n_alias or n_alias < 0:
-        raise ValueError(f"n_alias must be a non-negative integer or None; got n_alias = {n_alias!r}")
+    n_alias = check_count("n_alias", n_alias, 0, allowed=" or None")
     arrs = jnp.broadcast_arrays(f, sigma2, tau, w, dt, eps2)
-    return _psd_alias_sum(*arrs, int(n_alias))
+    return _psd_alias_sum(*arrs, n_alias)
 
 
 def _autocovariance(n, sigma2, tau, w, dt, eps2):
@@ -191,13 +213,14 @@ def frame_autocovariance(
     **Arguments:** `lag` n (integer, any sign); `k` [N/m]; `gamma` [N s/m]; `exposure` [s];
     `frame_interval` [s]; `temperature` [K]; `tracking_var` [m^2].
     **Returns:** C(n) [m^2].
+    **Raises:** ``ValueError`` for a lag that is not a whole number, or parameters out of range.
     """
     k, gamma, t = _check_trap(k, gamma, temperature)
     w = check_positive("exposure", exposure, "s", what="exposure time W")
     dt = check_positive("frame_interval", frame_interval, "s", what="frame interval dt")
     w = check_exposure_le_interval(w, dt)
     eps2 = check_nonnegative("tracking_var", tracking_var, "m^2", what="tracking-error variance")
-    n = jnp.asarray(lag)
+    n = check_integer("lag", lag, what="frame lag")
     return _autocovariance(n, BOLTZMANN * t / k, gamma / k, w, dt, eps2)
 
 

@@ -165,3 +165,26 @@ def test_jit_vmap_over_parameters():
             np.asarray(out[i]),
             np.asarray(bt.psd_measured(np.array([10.0, 300.0]), float(k), GAMMA, 1e-3,
                                        frame_interval=2e-3, tracking_var=1e-18)), rtol=1e-14)
+
+
+@pytest.mark.parametrize("k,dt,w", [(5e-5, 1 / 1500, 1 / 1500), (1e-9, 1 / 1500, 1e-5),
+                                    (1e-3, 0.05, 0.05), (1e-3, 1.0, 1e-4), (2e-5, 1e-5, 1e-5)])
+def test_expected_block_periodogram_equals_fejer_sum(k, dt, w):
+    """E[I_j] of a block of M frames = dt [C(0) + 2 sum_{n<M} (1 - n/M) C(n) cos(theta n)]
+    summed term by term from frame_autocovariance, from tau >> M dt (free diffusion) to
+    dt/tau ~ 7e5 (rho underflows to 0)."""
+    from blurtrap.physics._spectra import _expected_block_periodogram
+
+    gamma, temp, eps2 = 1.37e-8, 295.0, 4e-18
+    m = 64
+    lags = np.arange(1, m)
+    c = np.array([float(bt.physics.frame_autocovariance(int(n), k, gamma, w, dt, temp, eps2))
+                  for n in range(m)])
+    f = np.arange(1, m // 2 + 1) / (m * dt)
+    th = 2 * np.pi * f[:, None] * dt
+    ref = dt * (c[0] + 2 * np.sum((1 - lags / m) * c[1:] * np.cos(th * lags), axis=1))
+    sigma2 = 1.380649e-23 * temp / k
+    got = np.asarray(_expected_block_periodogram(jnp.asarray(f), float(m), sigma2, gamma / k, w,
+                                                 dt, eps2))
+    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12 * np.max(np.abs(ref)))
