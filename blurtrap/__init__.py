@@ -69,6 +69,9 @@ from .inference import (
     TrapModel as TrapModel,
 )
 from .inference import (
+    Uniform as Uniform,
+)
+from .inference import (
     calibrate as calibrate,
 )
 from .inference import (

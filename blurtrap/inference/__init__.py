@@ -45,6 +45,9 @@ from ._priors import (
     Prior as Prior,
 )
 from ._priors import (
+    Uniform as Uniform,
+)
+from ._priors import (
     stokes_gamma as stokes_gamma,
 )
 from ._priors import (

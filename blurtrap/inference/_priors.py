@@ -8,7 +8,8 @@ density **with respect to the natural SI parameter** ``p`` (``k`` [N/m], ``gamma
 The sampler works in ``theta = log p`` and adds the Jacobian ``log |dp/dtheta| = theta``
 itself, so a prior written here as a density in ``p`` means exactly that. In particular the
 default :class:`LogUniform` prior, ``p(p) = 1/(p log(high/low))`` on ``[low, high]``, is
-uniform in ``log p``.
+uniform in ``log p``. The default for ``tracking_var`` is :class:`Uniform` on ``[0, 1e-10]``
+m^2 (eps^2 can be consistent with 0, where a log-uniform prior depends on its cut-off).
 
 Physics-based priors:
 
@@ -31,12 +32,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-# Wide physical bounds of the default log-uniform priors (SI).
+# Wide physical bounds of the default priors (SI), core and effect parameters: log-uniform,
+# except ``tracking_var`` (uniform on [0, 1e-10] m^2; see :class:`Uniform`).
 DEFAULT_BOUNDS = {
     "k": (1e-10, 1.0),  # 1e-7 .. 1e3 pN/nm
     "c": (1e-10, 1e2),  # N/m/W
     "gamma": (1e-13, 1e-3),  # N s/m
-    "tracking_var": (1e-26, 1e-10),  # 1e-8 nm^2 .. 100 um^2
+    "tracking_var": (0.0, 1e-10),  # m^2: 0 .. 100 um^2
+    "drift_diffusion": (1e-30, 1e-8),  # m^2/s: 1e-12 .. 1e10 nm^2/s
+    "line_amplitude": (1e-15, 1e-5),  # m
+    "rise_fraction": (1e-6, 0.5),  # of the exposure
+    "f3db": (1.0, 1e8),  # Hz
+    "diode_alpha": (1e-6, 1.0),
+    "hydro_radius": (1e-9, 1e-3),  # m
+    "power_offset": (1e-9, 10.0),  # W
+    "heating": (1e-3, 1e4),  # K/W
 }
 
 
@@ -72,6 +82,31 @@ class LogUniform(Prior):
         safe = jnp.where(value > 0, value, 1.0)
         lp = -jnp.log(safe) - jnp.log(jnp.log(self.high / self.low))
         return jnp.where(inside, lp, -jnp.inf)
+
+
+class Uniform(Prior):
+    """Uniform prior on ``[low, high]`` in the natural parameter (``0 <= low < high``).
+
+    The default for ``tracking_var``: the data often cannot exclude eps^2 = 0 (the ML
+    estimate then sits on that bound), and a log-uniform prior would put posterior mass
+    proportional to ``L(0) x log(eps^2_typical / low)`` near eps^2 ~ low, i.e. on an
+    arbitrary lower cut-off, dragging the correlated k and gamma with it."""
+
+    low: jax.Array
+    high: jax.Array
+
+    def __init__(self, low, high):
+        low, high = float(low), float(high)
+        if not (0.0 <= low < high) or not math.isfinite(high):
+            raise ValueError(
+                f"Uniform needs 0 <= low < high < inf; got low = {low!r}, high = {high!r}"
+            )
+        self.low = np.asarray(low, dtype=np.float64)
+        self.high = np.asarray(high, dtype=np.float64)
+
+    def log_prob(self, value):
+        inside = (value >= self.low) & (value <= self.high) & (value > 0)
+        return jnp.where(inside, -jnp.log(self.high - self.low), -jnp.inf)
 
 
 class Normal(Prior):
