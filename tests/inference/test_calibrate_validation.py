@@ -112,12 +112,20 @@ def test_slow_relaxation_switches_whittle_to_exact():
     assert any("leakage index" in n for n in res_w.notes), res_w.notes
 
 
-def test_free_diffusion_is_a_clear_error():
+@pytest.mark.parametrize("seed", [2, 3])
+def test_free_diffusion_is_refused_or_honest(seed):
     """k = 1e-8 pN/nm: tau ~ 23 min >> the 11 s record. Whittle used to return gamma 7x off
-    with a 1 % error bar; now the error says why k cannot be identified."""
-    r = _rec(1e-11, 2**14 + 8, seed=2)
-    with pytest.raises(FitError, match="diffuses almost freely"):
-        bt.calibrate(r)
+    with a 1 % error bar. Now, depending on the noise realisation, the fit is refused with a
+    message that says why k is not identified, or k comes back consistent with 0 within its
+    (huge) error; gamma is right either way."""
+    r = _rec(1e-11, 2**14 + 8, seed=seed)
+    try:
+        res = bt.calibrate(r)
+    except FitError as exc:
+        assert "diffuses almost freely" in str(exc) or "singular" in str(exc)
+        return
+    assert abs(res.k - 1e-11) < 5 * res.k_err and res.k_err > 0.3 * res.k
+    assert abs(res.gamma - GAMMA) < 5 * res.gamma_err
 
 
 @pytest.mark.parametrize("k,w_over_dt", [(1e-9, 1.0), (1e-6, 0.02), (5e-5, 1.0), (3e-4, 1.0),

@@ -1,0 +1,35 @@
+"""Many trajectories run in cache-sized tiles (blurtrap.simulate._core.run_chunk): the tiles
+must give exactly the numbers of the untiled scan (same counters per trajectory)."""
+
+import jax
+import numpy as np
+import pytest
+
+from blurtrap.simulate import ExposureWindows, _core, simulate
+
+K, TAU = 5e-5, 0.537e-3
+CASES = [
+    ("exact", dict(substeps=9, exposure=0.5 * TAU)),
+    ("exact_frames", dict(exposure=ExposureWindows([0.2 * TAU, 0.5 * TAU]))),
+]
+
+
+@pytest.mark.parametrize("method, kw", CASES, ids=[c[0] for c in CASES])
+def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
+    def run(tile_bytes):
+        monkeypatch.setattr(_core, "_TILE_BYTES", tile_bytes)
+        jax.clear_caches()  # the tile size is read when run_chunk is traced
+        return np.asarray(simulate(K, K * TAU, frame_interval=TAU, n_frames=6,
+                                   key=jax.random.key(5), n_traces=700, method=method,
+                                   chunk_frames=4, **kw))
+
+    untiled = run(1 << 40)
+    tiled = run(256)  # tiles of 256 trajectories: 3 tiles, the last one padded
+    # the scan really ran in tiles (exact: 10 rows per frame, exact_frames: 4)
+    rows = {"exact": (9, 1, 1), "exact_frames": (0, 1, 2)}[method]
+    cfg = _core.CoreConfig(method, rows[0], rows[1], rows[2], rows[2], False, None, "float64",
+                           None, 1, "float64")
+    assert _core.tile_size(cfg, 700) == 256
+    jax.clear_caches()
+    np.testing.assert_array_equal(tiled, untiled)
+    assert np.all(np.isfinite(tiled)) and np.std(tiled) > 0
