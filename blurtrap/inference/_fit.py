@@ -30,6 +30,7 @@ class FitOutput(eqx.Module):
 
 
 def _finish(f, x, args, scale, converged, n_steps):
+    args = (args, scale)  # the objective takes scale through its args (no closed-over tracer)
     """Assemble a FitOutput at ``x``: observed Fisher information in natural (scaled)
     parameters u = exp(x), from the log-space Hessian: d2f/du2 = (H_x - diag(grad_x))/(u u^T).
     """
@@ -54,9 +55,14 @@ def _finish(f, x, args, scale, converged, n_steps):
     )
 
 
-def _log_objective(nll, scale):
+def _log_objective(nll):
+    """``f(x, (args, scale)) = nll(scale * exp(x), args)``. ``scale`` travels in the args, not
+    in a closure: optimistix closure-converts the objective, and a closed-over traced value
+    stays alive in jax's caches (a tracer leak under JAX_CHECK_TRACER_LEAKS)."""
+
     def f(x, a):
-        return nll(scale * jnp.exp(x), a)
+        args, scale = a
+        return nll(scale * jnp.exp(x), args)
 
     return f
 
@@ -64,16 +70,17 @@ def _log_objective(nll, scale):
 def _newton(nll, scale, args, rtol, atol):
     """Newton on the score (optimistix root find; exact Hessian; ~4 steps from the
     closed-form start). Reported as converged only if it also lowered the objective."""
-    f = _log_objective(nll, scale)
+    f = _log_objective(nll)
     x0 = jnp.zeros_like(scale)
+    a = (args, scale)
     sol = optx.root_find(
-        jax.grad(f), optx.Newton(rtol=rtol, atol=atol), x0, args=args, max_steps=64, throw=False
+        jax.grad(f), optx.Newton(rtol=rtol, atol=atol), x0, args=a, max_steps=64, throw=False
     )
     x = sol.value
     ok = (
         (sol.result == optx.RESULTS.successful)
         & jnp.all(jnp.isfinite(x))
-        & (f(x, args) <= f(x0, args))
+        & (f(x, a) <= f(x0, a))
     )
     x = jnp.where(ok, x, x0)
     return f, x, ok, sol.stats["num_steps"]
@@ -81,9 +88,9 @@ def _newton(nll, scale, args, rtol, atol):
 
 def _bfgs(nll, scale, args, rtol, atol, max_steps):
     """BFGS minimisation with line search: the robust fallback."""
-    f = _log_objective(nll, scale)
+    f = _log_objective(nll)
     sol = optx.minimise(
-        f, optx.BFGS(rtol=rtol, atol=atol), jnp.zeros_like(scale), args=args,
+        f, optx.BFGS(rtol=rtol, atol=atol), jnp.zeros_like(scale), args=(args, scale),
         max_steps=max_steps, throw=False,
     )
     return f, sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
@@ -117,7 +124,7 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -
 @eqx.filter_jit
 def _bfgs_value_only(nll, scale, args, rtol, atol, max_steps):
     f, x, ok, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
-    return scale * jnp.exp(x), f(x, args), ok
+    return scale * jnp.exp(x), f(x, (args, scale)), ok
 
 
 def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=400):
@@ -129,8 +136,8 @@ def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=
 
 @eqx.filter_jit
 def _value_grad_batch(nll, scale, args, xs):
-    f = _log_objective(nll, scale)
-    return jax.vmap(jax.value_and_grad(f), in_axes=(0, None))(xs, args)
+    f = _log_objective(nll)
+    return jax.vmap(jax.value_and_grad(f), in_axes=(0, None))(xs, (args, scale))
 
 
 def _fd_hessian_points(x, h):

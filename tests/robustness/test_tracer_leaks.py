@@ -63,21 +63,13 @@ SCRIPT = textwrap.dedent(
     '''
 )
 
-LEAK_IN_BFGS = (
-    "tracer leak (JAX_CHECK_TRACER_LEAKS): blurtrap/inference/_fit.py _bfgs hands "
-    "optx.minimise an objective that closes over the traced start vector `scale` "
-    "(_log_objective(nll, scale)); the closure-converted jaxpr keeps that tracer alive in jax's "
-    "separate_consts cache. diagnose reaches it through screen_model -> fit_nll_only -> "
-    "_bfgs_value_only (calibrate only when Newton fails). Passing scale through `args` "
-    "(f(x, (args, scale))) removes the leak."
-)
 # step -> known cause (None: must not leak)
 STEPS = {
     "simulate": None,
     "calibrate (default: exact likelihood)": None,
     "calibrate (likelihood=whittle)": None,
     "calibrate_batch": None,
-    "diagnose": LEAK_IN_BFGS,
+    "diagnose": None,
     "sample_posterior": None,
 }
 
