@@ -174,23 +174,37 @@ def test_bad_arguments():
 
 
 def test_no_recompilation_for_new_data_of_same_shape(monkeypatch, camera_set):
+    """A trace counter on the function that evaluates the Whittle objective inside the fit
+    (the one-pass value/gradient/Hessian) and a count of XLA compilations (builds and
+    persistent-cache loads both report the event): both must stay put on new data."""
     calls = {"n": 0}
-    orig = _problems.spectral_model_psd
+    orig = _problems.spectral_newton_pass
 
-    def counting(p, a):
+    def counting(*args):
         calls["n"] += 1  # runs only while tracing
-        return orig(p, a)
+        return orig(*args)
 
-    monkeypatch.setattr(_problems, "spectral_model_psd", counting)
+    compiled = []
+
+    def listener(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(kw.get("fun_name"))
+
+    monkeypatch.setattr(_problems, "spectral_newton_pass", counting)
     # a record length not used elsewhere, so the first call must trace
     recs = [bt.Recording(r.positions[:20001], frame_interval=DT, exposure=DT)
             for r in camera_set[:3]]
-    bt.calibrate(recs[0])
-    n_first = calls["n"]
-    assert n_first > 0
-    bt.calibrate(recs[1])
-    bt.calibrate(recs[2])
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        bt.calibrate(recs[0])
+        n_first, c_first = calls["n"], len(compiled)
+        assert n_first > 0 and c_first > 0
+        bt.calibrate(recs[1])
+        bt.calibrate(recs[2])
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
     assert calls["n"] == n_first
+    assert compiled[c_first:] == []
 
 
 def test_calibrate_batch_equals_individual_fits(camera_set):
