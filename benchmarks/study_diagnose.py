@@ -78,6 +78,67 @@ def laser_heating_recs(seed, b=25.0):
     return recs
 
 
+# --- photodiode (fast) scenarios: 1.5 um bead, k = 0.05 pN/nm, eps = 0.2 nm, W -> 0 ----------
+R_PD = 1.5e-6
+K_PD = 5e-5
+W_PD = 1e-8
+EPS_PD = 0.2e-9
+
+
+def gamma_stokes(radius, temperature=295.0):
+    from blurtrap.physics._effects import water_viscosity
+
+    return 6 * math.pi * float(water_viscosity(temperature)) * radius
+
+
+GAMMA_PD = gamma_stokes(R_PD)
+
+
+def photodiode(seed, dt=1e-5, n=2**14, injections=(), method="exact_frames", radius=R_PD):
+    g = gamma_stokes(radius)
+    x = np.asarray(bt.simulate(K_PD, g, W_PD, dt, n, key=jax.random.key(seed), method=method,
+                               tracking_std=EPS_PD, injections=injections))[0]
+    return bt.Recording(x, frame_interval=dt, exposure=W_PD)
+
+
+def hydro(seed, radius=R_PD, dt=5e-6, n=2**16):
+    from blurtrap.simulate import HydrodynamicFriction
+
+    return photodiode(seed, dt=dt, n=n, injections=(HydrodynamicFriction(radius),),
+                      method="spectral", radius=radius)
+
+
+def diode(seed, f3db=8e3, alpha=0.4):
+    from blurtrap.simulate import PhotodiodeFilter
+
+    return photodiode(seed, injections=(PhotodiodeFilter(f3db, alpha),))
+
+
+def anharmonic(seed, beta):
+    from blurtrap.physics import BOLTZMANN
+
+    k4 = beta * K * K / (BOLTZMANN * 295.0)
+    x = np.asarray(bt.simulate(K, GAMMA, DT, DT, N, key=jax.random.key(seed), method="euler",
+                               force=bt.quartic_force, force_params=(K, k4), substeps=64,
+                               burn_in_frames=200, tracking_std=EPS))[0]
+    return bt.Recording(x, frame_interval=DT, exposure=DT)
+
+
+K_SERIES = 5e-5
+
+
+def exposure_series(seed, rise=0.5, fracs=(0.25, 0.5, 0.75, 1.0)):
+    recs = []
+    for i, fr in enumerate(fracs):
+        w = fr * DT
+        prof = bt.TrapezoidProfile(rise) if rise > 0 else None
+        x = np.asarray(bt.simulate(K_SERIES, GAMMA, w, DT, N, key=jax.random.key(10 * seed + i),
+                                   method="exact", substeps=40, exposure_profile=prof,
+                                   tracking_std=EPS))[0]
+        recs.append(bt.Recording(x, frame_interval=DT, exposure=w))
+    return recs
+
+
 SCENARIOS = {
     # name: (hidden effect, builder, model, truth-check kind, parameter label)
     "control": (None, lambda s: record(s), None, "single", "nothing hidden"),
@@ -105,19 +166,56 @@ SCENARIOS = {
                       "4 powers 0.1-1 W, b = 25 K/W"),
     "laser_heating_weak": ("laser_heating", lambda s: laser_heating_recs(s, b=10.0), None,
                            "heating", "4 powers 0.1-1 W, b = 10 K/W"),
+    # photodiode, exposure-series and anharmonic scenarios (truth in TRUTH_KG)
+    "control_photodiode": (None, lambda s: photodiode(s), None, "single",
+                           "100 kHz, 2^14 samples, nothing hidden"),
+    "detector_filter": ("detector_filter", lambda s: diode(s), None, "single",
+                        "f3dB = 8 kHz, alpha = 0.4, 100 kHz, 2^14 samples"),
+    "detector_filter_weak": ("detector_filter", lambda s: diode(s, 30e3, 0.6), None, "single",
+                             "f3dB = 30 kHz, alpha = 0.6, 100 kHz, 2^14 samples"),
+    "hydrodynamics": ("hydrodynamics", lambda s: hydro(s), None, "single",
+                      "R = 1.5 um, 200 kHz, 2^16 samples"),
+    "hydrodynamics_1um": ("hydrodynamics", lambda s: hydro(s, radius=1.0e-6), None, "single",
+                          "R = 1.0 um, 200 kHz, 2^16 samples"),
+    "hydrodynamics_0.5um": ("hydrodynamics", lambda s: hydro(s, radius=0.5e-6), None, "single",
+                            "R = 0.5 um, 200 kHz, 2^16 samples"),
+    "hydrodynamics_0.25um": ("hydrodynamics", lambda s: hydro(s, radius=0.25e-6), None,
+                             "single", "R = 0.25 um, 200 kHz, 2^16 samples"),
+    "hydrodynamics_short": ("hydrodynamics", lambda s: hydro(s, dt=1e-5, n=2**14), None,
+                            "single", "R = 1.5 um, 100 kHz, 2^14 samples"),
+    "anharmonicity": ("anharmonicity", lambda s: anharmonic(s, 0.1), None, "histogram",
+                      "beta = k4 kT/k^2 = 0.1, camera"),
+    "anharmonicity_weak": ("anharmonicity", lambda s: anharmonic(s, 0.05), None, "histogram",
+                           "beta = 0.05, camera"),
+    "control_series": (None, lambda s: exposure_series(s, rise=0.0), None, "single",
+                       "4 exposures 0.25-1 dt, rectangular, k = 0.05 pN/nm"),
+    "exposure_kernel": ("exposure_kernel", lambda s: exposure_series(s, rise=0.5), None,
+                        "single", "4 exposures, triangular profile (rise = W/2)"),
+    "exposure_kernel_weak": ("exposure_kernel", lambda s: exposure_series(s, rise=0.25), None,
+                             "single", "4 exposures, trapezoid rise = W/4"),
 }
 SEED_BASE = {name: (1000 if name == "control" else 2000 + 100 * i)
              for i, name in enumerate(SCENARIOS)}
+TRUTH_KG = {name: (K_PD, GAMMA_PD) for name in SCENARIOS
+            if name.startswith(("control_photodiode", "detector_filter", "hydrodynamics"))}
+TRUTH_KG.update({"hydrodynamics_1um": (K_PD, gamma_stokes(1.0e-6)),
+                 "hydrodynamics_0.5um": (K_PD, gamma_stokes(0.5e-6)),
+                 "hydrodynamics_0.25um": (K_PD, gamma_stokes(0.25e-6)),
+                 "control_series": (K_SERIES, GAMMA), "exposure_kernel": (K_SERIES, GAMMA),
+                 "exposure_kernel_weak": (K_SERIES, GAMMA)})
 TRUTH = {"power_offset": 0.05, "power_offset_weak": 0.01, "laser_heating": 25.0,
          "laser_heating_weak": 10.0}
 
 
 def fixed_ok(name, kind, fit):
     """(gof, truth) checks of the full refit with the first-ranked effect."""
+    if kind == "histogram":  # not part of the Gaussian likelihood: nothing to refit
+        return True
     if fit is None:
         return None
     if kind == "single":
-        return within(fit)
+        k, g = TRUTH_KG.get(name, (K, GAMMA))
+        return within(fit, k=k, gamma=g)
     if kind == "power_offset":
         i = fit.param_names.index("power_offset") if "power_offset" in fit.param_names else None
         if i is None:
@@ -147,16 +245,41 @@ def run_one(name, seed):
         "top_p": float(top.p_value) if top else None,
         "top_daic": (None if top is None or top.delta_aic is None else float(top.delta_aic)),
         "significant": [c.effect for c in d.ranking if c.significant],
-        "base_within": within(d.fit) if kind == "single" else None,
+        "base_within": (within(d.fit, k=TRUTH_KG.get(name, (K, GAMMA))[0],
+                               gamma=TRUTH_KG.get(name, (K, GAMMA))[1])
+                        if kind in ("single", "histogram") else None),
+        "implausible": [c.effect for c in d.ranking if not getattr(c, "plausible", True)],
         "notes": list(d.notes),
     }
     if effect is not None:
         row["identified"] = bool(top is not None and top.effect == effect and top.significant)
         row["fixed_gof_p"] = None if fit is None else float(fit.gof["p_value"])
-        row["fixed_gof_ok"] = None if fit is None else bool(fit.gof["p_value"] > d.threshold)
+        row["fixed_gof_ok"] = (True if kind == "histogram" else
+                               None if fit is None else bool(fit.gof["p_value"] > d.threshold))
         row["fixed_truth_ok"] = fixed_ok(name, kind, fit) if row["identified"] else None
         row["fixed_ok"] = bool(row["identified"] and row["fixed_gof_ok"] and row["fixed_truth_ok"])
     return row, d
+
+
+def drift_pulls(n_seeds, d_drift=2e-16, seed0=7000):
+    """Calibration with ``standard+drift`` on records with a random-walk drift: the fitted
+    drift_diffusion relative to the injected one, its reported SE, and the k, gamma pulls."""
+    rows = []
+    for s in range(seed0, seed0 + n_seeds):
+        rec = record(s, injections=(bt.RandomWalkDrift(d_drift),))
+        fit = bt.calibrate(rec, method="likelihood", likelihood="whittle",
+                           model="standard+drift")
+        i = fit.param_names.index("drift_diffusion")
+        rows.append(((fit.k - K) / fit.k_err, (fit.gamma - GAMMA) / fit.gamma_err,
+                     fit.values[i] / d_drift, fit.errors[i] / d_drift))
+    r = np.array(rows)
+    n = len(r)
+    print(f"drift pulls over {n} records (seeds {seed0}-{seed0 + n - 1}, D_d = {d_drift:g} m^2/s)")
+    print(f"  k pull: mean {r[:, 0].mean():+.2f}, SD {r[:, 0].std(ddof=1):.2f}; "
+          f"gamma pull: mean {r[:, 1].mean():+.2f}, SD {r[:, 1].std(ddof=1):.2f}")
+    print(f"  D_hat/D_d: mean {r[:, 2].mean():.3f} +- {r[:, 2].std(ddof=1) / math.sqrt(n):.3f}, "
+          f"SD {r[:, 2].std(ddof=1):.3f}, median {np.median(r[:, 2]):.3f}; mean reported "
+          f"relative SE {r[:, 3].mean():.3f}; pull SD {((r[:, 2] - 1) / r[:, 3]).std(ddof=1):.2f}")
 
 
 def se(p, n):
@@ -209,10 +332,12 @@ def summarize(rows):
     lines = []
     errs = [r for r in rows if "error" in r]
     rows = [r for r in rows if "error" not in r]
-    ctrl = [r for r in rows if r["scenario"] == "control"]
-    if ctrl:
+    for cname in [nm for nm, sc in SCENARIOS.items() if sc[0] is None]:
+        ctrl = [r for r in rows if r["scenario"] == cname]
+        if not ctrl:
+            continue
         x, n, p, s = frac([{"fa": not r["adequate"]} for r in ctrl], "fa")
-        lines.append("## False alarms (control, model standard)\n")
+        lines.append(f"## False alarms ({cname}: {SCENARIOS[cname][4]}, model standard)\n")
         lines.append(f"flagged inadequate: {fmt(x, n, p, s)} (target <= 5 %)\n")
         lines.append("| seed | gof p | threshold | cause (significant candidates) |")
         lines.append("|---|---|---|---|")
@@ -276,6 +401,10 @@ def main(argv=None):
     ap.add_argument("--out", default="/tmp/diagnose_study", help="folder for diagnose_study.json")
     ap.add_argument("--seed-offset", type=int, default=0,
                     help="start each scenario at seed base + offset (to extend a study)")
+    ap.add_argument("--seeds-per", default="",
+                    help="per-scenario seed counts, e.g. hydrodynamics=10,control_photodiode=20")
+    ap.add_argument("--drift-pulls", type=int, default=0,
+                    help="only run the drift-parameter study on this many records")
     ap.add_argument("--verbose", action="store_true")
     ap.add_argument("--summarize", nargs="+", default=None,
                     help="only print the summary of these diagnose_study.json files (merged)")
@@ -287,10 +416,16 @@ def main(argv=None):
         uniq = {(r["scenario"], r["seed"]): r for r in rows}  # later files win
         print(summarize(list(uniq.values())))
         return
+    if args.drift_pulls:
+        bt.enable_x64()
+        bt.enable_compilation_cache()
+        drift_pulls(args.drift_pulls)
+        return
     if args.quick:
         args.seeds, args.effect_seeds = 4, 2
         args.weak_seeds = args.power_seeds = 1
     weak = args.effect_seeds if args.weak_seeds is None else args.weak_seeds
+    per = {kv.split("=")[0]: int(kv.split("=")[1]) for kv in args.seeds_per.split(",") if kv}
     power = args.effect_seeds if args.power_seeds is None else args.power_seeds
 
     bt.enable_x64()
@@ -310,9 +445,11 @@ def main(argv=None):
         if args.budget_s is not None and time.perf_counter() - t_start > args.budget_s:
             print(f"# budget exhausted: skipping {name}", flush=True)
             continue
-        if name == "control":
+        if name in per:
+            n = per[name]
+        elif name == "control":
             n = args.seeds
-        elif SCENARIOS[name][3] != "single":
+        elif SCENARIOS[name][3] not in ("single", "histogram"):
             n = power if not name.endswith("_weak") else min(power, weak)
         else:
             n = weak if name.endswith("_weak") else args.effect_seeds
@@ -334,7 +471,7 @@ def main(argv=None):
                      f"(gof {row['fixed_gof_p']}, truth {row['fixed_truth_ok']}) "
                      if 'identified' in row else "")
                   + f"{row['wall_s']:.1f}s", flush=True)
-            if args.verbose or (name == "control" and not row["adequate"]) or (
+            if args.verbose or (SCENARIOS[name][0] is None and not row["adequate"]) or (
                     "identified" in row and not row["fixed_ok"]):
                 print(d.summary(), flush=True)
             path.write_text(json.dumps({"info": info, "rows": rows}, indent=1))

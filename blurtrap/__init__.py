@@ -45,8 +45,10 @@ from .data import (
     save_npz as save_npz,
 )
 from .diagnostics import Diagnosis as Diagnosis
+from .diagnostics import Selection as Selection
 from .diagnostics import compare as compare
 from .diagnostics import diagnose as diagnose
+from .diagnostics import select_model as select_model
 from .inference import (
     CalibrationResult as CalibrationResult,
 )

@@ -128,7 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--model", choices=("naive", "blur", "standard"), default="standard",
                    help="starting model (default standard)")
     g.add_argument("--add", nargs="+", default=(), metavar="EFFECT",
-                   help="effects added to the model before diagnosing (canonical names)")
+                   help="effects added to the model before diagnosing (canonical names: "
+                   "motion_blur, aliasing, tracking_noise, drift, line_noise, exposure_kernel, "
+                   "detector_filter, hydrodynamics, power_offset, laser_heating; anharmonicity "
+                   "and timing_jitter are tested, not added)")
     g.add_argument("--alpha", type=float, default=0.05,
                    help="family-wise false-alarm rate (default 0.05)")
     g.add_argument("--json", action="store_true", help="print one JSON object")

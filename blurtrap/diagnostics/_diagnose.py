@@ -10,6 +10,16 @@ all candidates, so a correct model is flagged in <= alpha of data sets.
 Effects that are not part of the Gaussian likelihood are tested directly: anharmonicity by
 the kurtosis of the frames (against its correlated-sample standard error), timing_jitter from
 the time stamps. For those, ``delta_loglik`` is the score-test equivalent ``z^2/2``.
+
+Physical plausibility: a candidate whose refit needs impossible parameters is reported but
+never significant (``Candidate.plausible``): ``hydrodynamics`` with a radius above the Stokes
+radius ``gamma/(6 pi eta)`` (Faxen's law only raises gamma), ``detector_filter`` with an
+instantaneous fraction alpha > 1. At photodiode rates the two effects mimic each other's
+high-frequency deficit closely; the radius check is what tells a photodiode filter from
+hydrodynamics on short records (benchmarks/RESULTS_diagnose.md).
+
+:func:`select_model` runs ``diagnose`` repeatedly, adding the best significant effect each
+time (forward selection).
 """
 
 from __future__ import annotations
@@ -24,6 +34,7 @@ from ..inference._calibrate import as_recordings, calibrate, screen_model
 from ..inference._fit import chi2_sf
 from ..inference._models import get_model
 from ..inference._result import CalibrationResult, FitError
+from ..physics._effects import water_viscosity
 
 SPECTRAL_CANDIDATES = ("motion_blur", "aliasing", "tracking_noise", "drift", "line_noise",
                        "exposure_kernel", "detector_filter", "hydrodynamics")
@@ -45,11 +56,14 @@ class Candidate:
     evidence: str
     significant: bool = False
     fit: CalibrationResult | None = None
+    model: object = None  # the TrapModel with this effect added (likelihood effects only)
+    plausible: bool = True  # False: the refit needs physically impossible parameters
 
     def to_dict(self):
         return {"effect": self.effect, "delta_loglik": self.delta_loglik, "dof": self.dof,
                 "p_value": self.p_value, "delta_aic": self.delta_aic,
-                "significant": self.significant, "evidence": self.evidence}
+                "significant": self.significant, "plausible": self.plausible,
+                "evidence": self.evidence}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,6 +200,31 @@ def _kurtosis_test(recs, fit: CalibrationResult):
     return z, p
 
 
+# Largest fitted hydrodynamic radius accepted, relative to the Stokes radius gamma/(6 pi eta):
+# Faxen's law only raises gamma above 6 pi eta R, so R <= gamma/(6 pi eta); the margin covers
+# the scatter of R in a weakly informative fit.
+HYDRO_RADIUS_MARGIN = 1.5
+DIODE_ALPHA_MAX = 1.05
+
+
+def _plausible(name: str, params: dict, recs) -> tuple[bool, str]:
+    """Physical consistency of a candidate's refit. ``hydrodynamics``: the fitted radius must
+    not exceed the Stokes radius implied by the fitted gamma (near a wall gamma only grows,
+    Faxen), else the high-frequency shape it absorbs is something else (on photodiode-filter
+    data the hydrodynamic fit wants R ~ 3 x the Stokes radius). ``detector_filter``: the
+    instantaneous fraction alpha cannot exceed 1 (no gain above the DC response)."""
+    if name == "hydrodynamics":
+        temp = float(np.median([float(r.temperature) for r in recs]))
+        r_stokes = params["gamma"] / (6.0 * math.pi * float(water_viscosity(temp)))
+        r_fit = params["hydro_radius"]
+        if r_fit > HYDRO_RADIUS_MARGIN * r_stokes:
+            return False, (f"fitted radius {r_fit * 1e6:.3g} um exceeds the Stokes radius "
+                           f"{r_stokes * 1e6:.3g} um implied by gamma (gamma >= 6 pi eta R)")
+    if name == "detector_filter" and params["diode_alpha"] > DIODE_ALPHA_MAX:
+        return False, f"instantaneous fraction alpha = {params['diode_alpha']:.3g} > 1"
+    return True, ""
+
+
 @float64_scope
 def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str | None = None,
              add=()) -> Diagnosis:
@@ -234,6 +273,11 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     m = len(candidates) + 1
     threshold = alpha / m
     out = []
+    screened = {}  # candidate -> optimum of its screening fit (start of the full refit)
+    # warm start from the base fit, except parameters it pinned at a bound (eps^2 -> 0 when a
+    # deficit is missing): in log coordinates they could not move back, so they restart
+    # from their closed-form values
+    warm = {n: v for n, v in base.params.items() if n not in base.at_bounds}
     nll0 = base.extras["nll"]
     for name in candidates:
         if name == "anharmonicity":
@@ -260,7 +304,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
             config = {"frequency": f0, "width": 1.0 / T}
         try:
             test_model = mdl.add(name, **config)
-            params, nll1, gof1, ok = screen_model(recs, test_model, k, start=base.params)
+            params, nll1, gof1, ok = screen_model(recs, test_model, k, start=warm)
             if name in _CORE_FLAGS:
                 # adding a core effect can move k and gamma far from the misspecified base
                 # fit: also try the closed-form start and keep the better optimum
@@ -270,6 +314,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         except (FitError, ValueError) as exc:
             out.append(Candidate(name, None, 0, 1.0, None, f"refit failed: {exc}"))
             continue
+        screened[name] = params
         dof = len(params) - len(base.param_names)
         dll = float(nll0 - nll1)
         lr = max(2.0 * dll, 0.0)
@@ -289,30 +334,33 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         if not ok:
             ev += " (refit did not converge)"
         ev += f"; adding it: gof p {base.gof['p_value']:.2g} -> {gof1['p_value']:.2g}"
-        out.append(Candidate(name, dll, dof, p, 2.0 * dll - 2.0 * dof, ev))
+        plausible, why = _plausible(name, params, recs)
+        if not plausible:
+            ev += f"; IMPLAUSIBLE: {why}"
+        out.append(Candidate(name, dll, dof, p, 2.0 * dll - 2.0 * dof, ev, model=test_model,
+                             plausible=plausible))
     ranked = []
     for c in out:
-        sig = bool(c.p_value < threshold) and (c.delta_aic is None or c.delta_aic > 0)
+        sig = (bool(c.p_value < threshold) and (c.delta_aic is None or c.delta_aic > 0)
+               and c.plausible)
         ranked.append(dataclasses.replace(c, significant=sig))
     ranked.sort(key=lambda c: (not c.significant,
                                -(c.delta_aic if c.delta_aic is not None else
                                  (1e300 if c.significant else -1e300)),
                                c.p_value))
-    if ranked and ranked[0].significant:  # full fit (with errors) of the best candidate
-        top = ranked[0]
-        cfg = {}
-        if top.effect == "line_noise":
-            f0, _, _ = _line_candidate(base)
-            T = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
-            cfg = {"frequency": f0, "width": 1.0 / T}
-        try:
-            start = None if top.effect in _CORE_FLAGS else base.params
-            best_fit = calibrate(recs, method="likelihood", likelihood="whittle",
-                                 model=mdl.add(top.effect, **cfg), k=k, start=start,
-                                 strict=False)
-            ranked[0] = dataclasses.replace(top, fit=best_fit)
-        except (FitError, ValueError) as exc:
-            notes.append(f"full refit with {top.effect} failed: {exc}")
+    if ranked and ranked[0].significant and ranked[0].model is not None:
+        top = ranked[0]  # full fit (with errors) of the best candidate
+        # from the screening optimum; if that fails (a parameter near its bound 0 cannot
+        # converge in log coordinates), from the closed-form start
+        for start in (screened.get(top.effect), None):
+            try:
+                best_fit = calibrate(recs, method="likelihood", likelihood="whittle",
+                                     model=top.model, k=k, start=start, strict=False)
+                ranked[0] = dataclasses.replace(top, fit=best_fit)
+                break
+            except (FitError, ValueError) as exc:
+                if start is None:
+                    notes.append(f"full refit with {top.effect} failed: {exc}")
     gof_ok = base.gof["p_value"] >= threshold
     adequate = gof_ok and not any(c.significant for c in ranked)
     if not gof_ok and not any(c.significant for c in ranked):
@@ -323,6 +371,84 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         notes.append("nothing is missing: the model describes the data within its errors")
     return Diagnosis(model=mdl.name, fit=base, gof=base.gof, adequate=adequate,
                      ranking=tuple(ranked), threshold=threshold, notes=tuple(notes))
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """Result of :func:`select_model`: the model reached, whether it is adequate, and the
+    diagnosis of every step (``steps[0]`` is the starting model)."""
+
+    model: object
+    adequate: bool
+    steps: tuple[Diagnosis, ...]
+    added: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def fit(self) -> CalibrationResult:
+        """Fit of the final model (the last diagnosis's base fit)."""
+        return self.steps[-1].fit
+
+    def to_dict(self) -> dict:
+        return {"model": self.steps[-1].model, "adequate": self.adequate,
+                "added": list(self.added), "notes": list(self.notes),
+                "steps": [d.to_dict() for d in self.steps]}
+
+    def summary(self) -> str:
+        lines = []
+        for i, d in enumerate(self.steps):
+            best = d.best
+            what = ("adequate" if d.adequate else
+                    f"adds {best.effect} (dAIC {best.delta_aic:.1f}, p {best.p_value:.2g})"
+                    if best is not None and best.delta_aic is not None else "inadequate")
+            lines.append(f"step {i}: {d.model:<40s} gof p = {d.gof['p_value']:.3g}  {what}")
+        lines.append(f"final model: {self.steps[-1].model} "
+                     f"({'adequate' if self.adequate else 'NOT adequate'})")
+        lines.extend(f"note: {n}" for n in self.notes)
+        return "\n".join(lines)
+
+
+def select_model(data, model=None, *, max_steps: int = 3, alpha: float = 0.05,
+                 k: str | None = None, candidates=None) -> Selection:
+    """Forward selection: diagnose, add the best significant effect, diagnose again, until the
+    model is adequate, nothing significant is left, or `max_steps` effects were added.
+
+    Each step is one :func:`diagnose` call (Bonferroni over its candidates at family-wise
+    `alpha`), so the chance of adding a spurious effect at a given step is <= `alpha`; the
+    steps are not jointly corrected. Effects outside the Gaussian likelihood
+    (``anharmonicity``, ``timing_jitter``) cannot be added: when one ranks first the
+    selection stops and says so.
+
+    **Arguments:** `data`, `model`, `alpha`, `k`, `candidates` as in :func:`diagnose`;
+    `max_steps`: most effects to add (int >= 1).
+
+    **Returns:** :class:`Selection` (``model``, ``adequate``, ``added``, ``steps``).
+    """
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+        raise ValueError(f"max_steps must be an integer >= 1; got max_steps = {max_steps!r}")
+    recs = as_recordings(data)
+    mdl = get_model(model)
+    steps, added, notes = [], [], []
+    while True:
+        d = diagnose(recs, mdl, candidates=candidates, alpha=alpha, k=k)
+        steps.append(d)
+        best = d.best
+        if d.adequate or best is None:
+            break
+        if best.model is None:
+            notes.append(f"{best.effect} ranks first but is not part of the Gaussian likelihood "
+                         "(it cannot be added to the model): stopped")
+            break
+        if len(added) >= max_steps:
+            notes.append(f"stopped after max_steps = {max_steps} added effects; {best.effect} "
+                         "is still significant")
+            break
+        mdl = best.model
+        added.append(best.effect)
+        if candidates is not None:
+            candidates = [c for c in candidates if c != best.effect]
+    return Selection(model=mdl, adequate=steps[-1].adequate, steps=tuple(steps),
+                     added=tuple(added), notes=tuple(notes))
 
 
 def compare(fit_a: CalibrationResult, fit_b: CalibrationResult) -> dict:

@@ -107,12 +107,38 @@ class TrackingNoise(AbstractEffect):
 
 
 class Drift(AbstractEffect):
-    """Random-walk drift of diffusion ``drift_diffusion`` [m^2/s] (stage/laser).
+    r"""Random-walk drift of diffusion ``drift_diffusion`` [m^2/s] (stage/laser): increments of
+    variance ``2 D_d dt`` per frame, as injected by ``blurtrap.simulate.RandomWalkDrift``.
 
-    Signature: excess at the lowest frequencies (P ~ 1/f^2). Detectable when the drift power
-    at the lowest Fourier frequency exceeds the trap plateau by a few 1/sqrt(M) standard
-    errors: for a 65 536-frame camera record of a 0.01 pN/nm trap, D_d >~ 1e-4 nm^2/s...
-    1e-3 nm^2/s (about 1 nm of wander over the 44 s record)."""
+    **Model.** A random walk is not stationary: its periodogram is not its "PSD"
+    ``D_d dt^2 / (2 sin^2(pi f dt))`` (the spectrum of the increments divided by
+    ``|1 - e^{-i theta}|^2``, ``blurtrap.physics._effects.drift_psd``). Summation by parts gives
+    the DFT of a walk ``y`` of N frames at a Fourier frequency ``theta_j = 2 pi j/N``,
+    ``j != 0``: ``Y_j = (E_j - y_{N-1}) / (1 - e^{-i theta_j})`` with ``E_j`` the DFT of the
+    increments; the end-to-end displacement ``y_{N-1}`` (the record's net drift, a ramp seen
+    through the periodic DFT) adds exactly as much power as the increments, so the expected
+    periodogram is **exactly twice** that PSD at every ``j >= 1`` (mean subtraction only
+    touches j = 0; the same holds per block). This effect therefore models
+    ``E[I(f)] = D_d dt^2 / sin^2(pi f dt)``, so that ``drift_diffusion`` estimates the walk's
+    diffusion coefficient. (Before this correction the fitted value was 2.2 +- 0.16 times the
+    injected one over 100 records; see benchmarks/RESULTS_diagnose.md.)
+
+    **Its uncertainty is underestimated.** Half of the drift power is the one common ramp: the
+    ordinates are not independent (correlation ~0.4 between low ordinates of a pure walk), so
+    ``drift_diffusion`` scatters by ~70 % between records whatever their length (the net
+    displacement of one walk is a single chi^2_1 draw) while the Whittle standard error
+    assumes independence. Measured over 100 records (16 384 frames, D_d = 2e-16 m^2/s):
+    D_hat/D_d = 1.09 +- 0.08 (mean), SD 0.77, median 0.84; pulls (D_hat - D_d)/SE have SD 3.2,
+    i.e. the reported SE is ~3x too small. Treat ``drift_diffusion`` as an order of magnitude;
+    k and gamma keep calibrated errors (pull SD 0.97 and 0.99 in the same records).
+
+    **Signature and detectability.** Excess at the lowest frequencies (~1/f^2). Detected when
+    the drift power at the lowest Fourier frequencies exceeds the trap plateau
+    ``2 kT gamma/k^2`` by a few times: ``D_d T^2/pi^2 >~ 10 x 2 kT gamma/k^2``
+    (T = record length). Measured (benchmarks/study_diagnose.py; 16 384 frames at 1500 Hz,
+    T = 10.9 s, k = 0.01 pN/nm, 1.5 um bead): D_d = 200 nm^2/s found in 10/10 records,
+    2 nm^2/s in about half (D_d T^2/pi^2 ~ 10 x the plateau); the detectable D_d falls as
+    1/T^2 for longer records."""
 
     name: ClassVar[str] = "drift"
     kind: ClassVar[str] = "additive"
@@ -120,7 +146,8 @@ class Drift(AbstractEffect):
     signature: ClassVar[str] = "excess power at the lowest frequencies (~1/f^2)"
 
     def psd_add(self, f, dt, extras):
-        return drift_psd(f, dt, extras["drift_diffusion"])
+        # expected periodogram of a sampled random walk: twice its increment PSD (docstring)
+        return 2.0 * drift_psd(f, dt, extras["drift_diffusion"])
 
 
 class LineNoise(AbstractEffect):
@@ -141,15 +168,24 @@ class LineNoise(AbstractEffect):
 
 class ExposureKernel(AbstractEffect):
     """Trapezoidal exposure: linear rise and fall, each ``rise_fraction`` x W (0-0.5),
-    replacing the rectangle (|H|^2 = sinc^2(pi f W (1-r)) sinc^2(pi f W r)).
+    replacing the rectangle (|H|^2 = sinc^2(pi f W (1-r)) sinc^2(pi f W r)). Simulate it with
+    ``simulate(..., method="exact", exposure_profile=TrapezoidProfile(r))``.
 
     Identifiability (measured): with W <= dt the frames stay *exactly* ARMA(1,1) for any
     exposure kernel (same rho = exp(-dt/tau)); the kernel only changes S and B, which k, gamma
     and eps^2 absorb. From a single recording the shape is therefore not detectable (a
     triangular exposure, r = 0.5, on 65 536 camera frames at k = 0.05 pN/nm: likelihood gain
-    0.00, yet k biased by +1 to +3.5 SE with an acceptable fit). It becomes identifiable with an
-    exposure series or an independent eps^2 (stuck-bead prior); ``diagnose`` only proposes it
-    when the recordings have several exposures."""
+    0.00, yet k biased by +1 to +3.5 SE with an acceptable fit); ``diagnose`` only proposes it
+    when the recordings have several exposures. With an exposure series it is detectable when
+    the exposure is a sizeable fraction of tau: 4 exposures (0.25-1 dt, 1500 fps,
+    k = 0.05 pN/nm, alpha = W/tau up to 1.24, 16 384 frames each) -- a triangle (r = 0.5) was
+    ranked first and significant in 5/5 records (p 1e-5 to 2e-3, so near the limit; refit
+    adequate with k, gamma within 3 SE in 5/5), r = 0.25 only in 3/5; it becomes reliably
+    detectable at r ~ 0.5 with this series (longer records or exposures nearer tau
+    for smaller r). Detected or not, the rectangular-exposure fit had k or gamma > 3 SE off in
+    every one of these records (benchmarks/RESULTS_diagnose.md, section 4);
+    at dt >> tau (k = 0.1 pN/nm, 3 x 8192 frames) a triangle was missed in 2/2 records while
+    biasing k by ~2.8 SE."""
 
     name: ClassVar[str] = "exposure_kernel"
     kind: ClassVar[str] = "transfer"
@@ -168,8 +204,16 @@ class ExposureKernel(AbstractEffect):
 
 class DetectorFilter(AbstractEffect):
     """Photodiode low-pass (Berg-Sorensen et al. 2003): ``f3db`` [Hz] and ``diode_alpha``
-    (fraction of instantaneous response). Signature: high-frequency deficit with the filter
-    shape. Detectable with fast (>= 20 kHz) sampling when f3db is below ~fs/2."""
+    (fraction of instantaneous response), ``|H|^2 = a^2 + (1 - a^2)/(1 + (f/f3db)^2)``, acting
+    before the exposure average and the sampling (simulated exactly by
+    ``blurtrap.simulate.PhotodiodeFilter``). Signature: high-frequency deficit with the filter
+    shape; proposed by ``diagnose`` for fast (>= 10 kHz) sampling. Measured at 100 kHz,
+    2^14 samples, 1.5 um bead, k = 0.05 pN/nm: a silicon diode at 1064 nm (f3db = 8 kHz,
+    alpha = 0.4) was ranked first and significant in 5/5 records (refit adequate with k, gamma
+    within 3 SE in 4/5; the fifth refit had gof p = 2.5e-4), a weak one (30 kHz, alpha = 0.6)
+    in 4/5 (the fifth was named hydrodynamics with a plausible radius); 5 seeds each, so
+    these are rough rates. Its high-frequency deficit is also what an unphysically large hydrodynamic radius
+    produces; ``diagnose`` rejects that alternative by the Stokes-radius check."""
 
     name: ClassVar[str] = "detector_filter"
     kind: ClassVar[str] = "transfer"
@@ -188,11 +232,25 @@ class DetectorFilter(AbstractEffect):
 
 class Hydrodynamics(AbstractEffect):
     """Frequency-dependent friction of a sphere of hydrodynamic radius ``hydro_radius`` [m]
-    (Berg-Sorensen & Flyvbjerg 2004; fluid inertia + Basset force, water viscosity at T).
-    Faxen's law near a surface only rescales gamma (which stays free). Signature: small
-    excess at high frequency; needs fast sampling (f >~ f_nu/100, f_nu = nu/(pi R^2) ~ 140 kHz
-    for R = 1.5 um): detectable with photodiode data at >= 50 kHz and ~1e6 samples, not with
-    camera data."""
+    (Berg-Sorensen & Flyvbjerg 2004, eq. 12; fluid inertia + Basset force, water viscosity at
+    T, polystyrene bead). Faxen's law near a surface only rescales gamma (which stays free), so
+    a physical fit has ``hydro_radius <= gamma/(6 pi eta)``; ``diagnose`` rejects candidates
+    that violate it by more than 50 %. Simulate it with ``blurtrap.simulate.HydrodynamicFriction``
+    (``method="spectral"``).
+
+    Signature: relative to the best Lorentzian a high-frequency deficit growing like
+    sqrt(f/f_nu), f_nu = nu/(pi R^2) (~130 kHz for R = 1.5 um). Not visible in camera data.
+    Detectability (measured, benchmarks/RESULTS_diagnose.md; photodiode, W -> 0, k = 0.05 pN/nm,
+    eps = 0.2 nm): the standard model failed in every record for the radii tried, R = 1.5 um
+    (3/3, gof p < 1e-240) and R = 0.25 um (3/3: a high-frequency candidate at p < 1e-16, gof
+    p 5e-4 to 0.03), at 200 kHz with 2^16 samples (0.33 s); R = 0.5 and 1 um were not run.
+    Naming it correctly is harder than detecting it: a 2-parameter photodiode filter mimics
+    the deficit to within a few log-likelihood units (expected gap 2.0 per 2^14 samples at
+    100 kHz, R = 1.5 um). Measured (3 seeds each, rough rates): R = 1.5 um at 200 kHz, 2^16 samples: ranked first in 3/3
+    (refit adequate, k and gamma within 3 SE); R = 1.5 um at 100 kHz, 2^14 samples: 2/3 (one
+    named detector_filter); R = 0.25 um at 200 kHz, 2^16: 1/3 (two named detector_filter).
+    So for R = 1.5 um use >= 2^16 samples at 200 kHz; a small bead (R = 0.25 um) needs longer
+    records than that to be named rather than merely detected."""
 
     name: ClassVar[str] = "hydrodynamics"
     kind: ClassVar[str] = "friction"
@@ -235,10 +293,18 @@ class LaserHeating(AbstractEffect):
 
 
 class Anharmonicity(AbstractEffect):
-    """Quartic term in the potential (U = k x^2/2 + k4 x^4/4). Signature: non-Gaussian frame
-    histogram (negative excess kurtosis). Not part of the Gaussian (spectral/exact)
-    likelihood: ``diagnose`` tests it with the kurtosis of the frames against its
-    correlated-sample standard error; detectable when |excess kurtosis| >~ 5 sqrt(24/N_eff)."""
+    """Quartic term in the potential (U = k x^2/2 + k4 x^4/4; simulate with
+    ``simulate(..., method="euler", force=quartic_force, force_params=(k, k4))``). Signature:
+    non-Gaussian frame histogram (negative excess kurtosis for k4 > 0). Not part of the
+    Gaussian (spectral/exact) likelihood: ``diagnose`` tests it with the kurtosis of the frames
+    against its correlated-sample standard error, and it cannot be added to a model (no k, gamma
+    refit). With beta = k4 kT/k^2 the exact excess kurtosis of the stationary law is -0.094,
+    -0.18, -0.27 at beta = 0.02, 0.05, 0.1 (var = 0.95, 0.89, 0.82 kT/k, so the harmonic fit's k
+    is 5-22 % high). Measured on 16 384 camera frames (1500 fps, tau = 4 frames, SE of the
+    kurtosis ~0.056): beta = 0.1 ranked first and significant in 5/5 records, beta = 0.05 in
+    5/5 (5 seeds each); the harmonic fit's k or gamma was > 3 SE off in all 10. The expected
+    detection limit is |excess kurtosis| ~ 3 SE, i.e. beta ~ 0.03 at this record length
+    (scales as 1/sqrt(N); not measured below beta = 0.05)."""
 
     name: ClassVar[str] = "anharmonicity"
     kind: ClassVar[str] = "histogram"

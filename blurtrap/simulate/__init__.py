@@ -1,12 +1,19 @@
 """Brownian dynamics of a bead in an optical trap with in-loop exposure averaging.
 
-``simulate`` is the entry point; injections (tracking noise, drift, timing jitter), exposure
+``simulate`` is the entry point; injections (tracking noise, drift, timing jitter, photodiode
+filter, hydrodynamic friction), exposure
 profiles and forces are small composable pieces passed to it. Imports only
 ``blurtrap.physics``.
 """
 
 from ._injections import (
     AbstractInjection as AbstractInjection,
+)
+from ._injections import (
+    HydrodynamicFriction as HydrodynamicFriction,
+)
+from ._injections import (
+    PhotodiodeFilter as PhotodiodeFilter,
 )
 from ._injections import (
     RandomWalkDrift as RandomWalkDrift,

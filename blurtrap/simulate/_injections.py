@@ -6,9 +6,16 @@ with the frames in metres; they never touch the Brownian-dynamics loop. :class:`
 is the one effect that must act inside the loop (it moves the frame start times); it is passed
 in the same ``injections=`` tuple and picked out by :func:`blurtrap.simulate.simulate`.
 
+Two more effects change the dynamics or the detector itself and select their own exact
+sampler inside :func:`~blurtrap.simulate.simulate`: :class:`PhotodiodeFilter`
+(``detector_filter``: exact joint linear system, ``method="exact_frames"`` or
+``"spectral"``) and :class:`HydrodynamicFriction` (``hydrodynamics``: frequency-dependent
+friction, ``method="spectral"``).
+
 Canonical effect names (DESIGN section 3): ``tracking_noise`` (:class:`TrackingNoise`),
 ``drift`` (:class:`RandomWalkDrift`, :class:`SinusoidDrift`), ``timing_jitter``
-(:class:`TimingJitter`).
+(:class:`TimingJitter`), ``detector_filter`` (:class:`PhotodiodeFilter`), ``hydrodynamics``
+(:class:`HydrodynamicFriction`).
 """
 
 from __future__ import annotations
@@ -134,3 +141,79 @@ class TimingJitter(eqx.Module):
 
     def __init__(self, std):
         self.std = _nonneg("std", std, "s")
+
+
+class PhotodiodeFilter(eqx.Module):
+    r"""Photodiode low-pass (``detector_filter``; Berg-Sorensen et al., Rev. Sci. Instrum. 74,
+    3188 (2003)): a fraction `alpha` of the signal responds instantly, the rest through a
+    first-order low-pass of corner `f3db`,
+
+    $$H(f) = \alpha + \frac{1-\alpha}{1 + i f/f_{3dB}},\qquad
+      |H|^2 = \alpha^2 + \frac{1-\alpha^2}{1 + (f/f_{3dB})^2}.$$
+
+    The filter acts on the continuous position, before the exposure average and the sampling.
+    With ``method="exact_frames"`` the position and the filter state are integrated as one
+    exact linear Gaussian system (``blurtrap.simulate._linear``); ``method="spectral"`` draws
+    the same law from its discrete PSD. Typical silicon photodiodes at 1064 nm: f3db ~ 5-10 kHz,
+    alpha ~ 0.3-0.5.
+
+    - `f3db`: 3 dB corner frequency of the slow part [Hz], > 0.
+    - `alpha`: fraction of instantaneous response, in [0, 1].
+    """
+
+    f3db: float = eqx.field(static=True)
+    alpha: float = eqx.field(static=True)
+    name = "detector_filter"
+
+    def __init__(self, f3db, alpha):
+        f3 = float(f3db)
+        al = float(alpha)
+        if not (np.isfinite(f3) and f3 > 0):
+            raise ValueError(f"f3db must be finite and > 0 Hz; got f3db = {f3db!r} Hz")
+        if not (0.0 <= al <= 1.0):
+            raise ValueError(f"alpha (instantaneous fraction) must be in [0, 1]; got alpha = "
+                             f"{alpha!r}")
+        self.f3db = f3
+        self.alpha = al
+
+
+class HydrodynamicFriction(eqx.Module):
+    r"""Frequency-dependent friction of a sphere (``hydrodynamics``; Berg-Sorensen & Flyvbjerg,
+    Rev. Sci. Instrum. 75, 594 (2004), eq. 12): Stokes friction with fluid inertia and the
+    Basset force, plus the bead's and the entrained fluid's inertia,
+
+    $$\gamma(f) = \gamma_0\Big(1 + (1-i)\sqrt{f/f_\nu} - \tfrac{2i}{9} f/f_\nu\Big),\quad
+      f_\nu = \frac{\eta}{\pi\rho_f R^2},$$
+    $$P(f) = \frac{D}{2\pi^2}\,\frac{1 + \sqrt{f/f_\nu}}
+      {(f_c - f^{3/2}/\sqrt{f_\nu} - f^2/f_m)^2 + (f + f^{3/2}/\sqrt{f_\nu})^2},\quad
+      f_m = \frac{\gamma_0}{2\pi m^*},\ m^* = \tfrac{4}{3}\pi R^3(\rho_b + \rho_f/2).$$
+
+    ``gamma`` passed to :func:`simulate` is the zero-frequency friction gamma_0 (include
+    Faxen's wall correction there, e.g. ``gamma = 6 pi eta R * faxen_factor(R, h)``); the
+    radius sets only the frequency dependence. Needs ``method="spectral"`` (no Markovian
+    simulation exists in the position alone).
+
+    - `radius`: bead radius R [m], > 0.
+    - `viscosity`: fluid viscosity eta [Pa s] or ``None`` (water at the simulation
+      temperature, ``blurtrap.physics`` Vogel fit).
+    - `fluid_density`, `bead_density`: [kg/m^3] (defaults: water 997, polystyrene 1050).
+    """
+
+    radius: float = eqx.field(static=True)
+    viscosity: float | None = eqx.field(static=True)
+    fluid_density: float = eqx.field(static=True)
+    bead_density: float = eqx.field(static=True)
+    name = "hydrodynamics"
+
+    def __init__(self, radius, viscosity=None, fluid_density=997.0, bead_density=1050.0):
+        for nm, v, unit in (("radius", radius, "m"), ("fluid_density", fluid_density, "kg/m^3"),
+                            ("bead_density", bead_density, "kg/m^3")):
+            if not (np.isfinite(float(v)) and float(v) > 0):
+                raise ValueError(f"{nm} must be finite and > 0 {unit}; got {nm} = {v!r} {unit}")
+        if viscosity is not None and not (np.isfinite(float(viscosity)) and float(viscosity) > 0):
+            raise ValueError(f"viscosity must be finite and > 0 Pa s (or None for water); got "
+                             f"viscosity = {viscosity!r} Pa s")
+        self.radius = float(radius)
+        self.viscosity = None if viscosity is None else float(viscosity)
+        self.fluid_density = float(fluid_density)
+        self.bead_density = float(bead_density)

@@ -17,9 +17,16 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ..physics import BOLTZMANN, DEFAULT_TEMPERATURE
 from . import _coeffs as co
 from ._core import CoreConfig, jitter_normals, run_chunk_jit
-from ._injections import AbstractInjection, TimingJitter
+from ._injections import (
+    AbstractInjection,
+    HydrodynamicFriction,
+    PhotodiodeFilter,
+    TimingJitter,
+)
+from ._linear import simulate_photodiode
+from ._spectral import simulate_spectral
 
-_METHODS = ("exact", "euler", "exact_frames")
+_METHODS = ("exact", "euler", "exact_frames", "spectral")
 _AUTO_BIAS = 1e-3  # target relative variance bias when substeps=None
 
 
@@ -151,6 +158,32 @@ def _progress(done, total, t0, stream):
     stream.flush()
 
 
+def _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau, n, n_traces, dtype,
+                    k_init, k_frames):
+    """Frames (G, T, n) in units of sigma from the exact photodiode system or the spectral
+    sampler (dimensionless: times in tau, frequencies in 1/tau)."""
+    from ..physics._effects import water_viscosity
+
+    g_n = kf.shape[0]
+    if method == "exact_frames":  # photodiode filter, exact joint linear system
+        lam = np.full(g_n, 2.0 * np.pi * photodiode.f3db) * tau
+        alpha = np.full(g_n, photodiode.alpha)
+        return simulate_photodiode(lam, alpha, wf / tau, np.maximum(dtf - wf, 0.0) / tau, n,
+                                   n_traces, dtype, k_init, k_frames)
+    p = {"w": wf / tau}
+    if photodiode is not None:
+        p["f3db"] = np.full(g_n, photodiode.f3db) * tau
+        p["alpha"] = np.full(g_n, photodiode.alpha)
+    if hydro is not None:
+        eta = (np.asarray(water_viscosity(tf), dtype=np.float64) if hydro.viscosity is None
+               else np.full(g_n, hydro.viscosity))
+        r = hydro.radius
+        m_star = 4.0 / 3.0 * np.pi * r**3 * (hydro.bead_density + 0.5 * hydro.fluid_density)
+        p["f_nu"] = eta / (hydro.fluid_density * np.pi * r**2) * tau
+        p["f_m"] = gf / (2.0 * np.pi * m_star) * tau
+    return simulate_spectral(p, dtf / tau, n, n_traces, dtype, k_frames)
+
+
 def simulate(
     k,
     gamma,
@@ -211,7 +244,15 @@ def simulate(
 
       followed by an exact OU step over the dead time ``dt - W``. Several windows are drawn
       segment by segment (between consecutive window ends) with the same law. Exact at any
-      ``dt``, ``W``; cost O(1) per frame.
+      ``dt``, ``W``; cost O(1) per frame. With a :class:`PhotodiodeFilter` injection the
+      position and the detector's filter state are advanced together as one exact linear
+      Gaussian system (``blurtrap.simulate._linear``).
+    - ``"spectral"``: stationary Gaussian frames drawn from their exact discrete PSD (folded
+      continuous PSD times ``sinc^2(f W)`` and an optional photodiode ``|H|^2``) by circulant
+      embedding on ``2 n_frames`` points (``blurtrap.simulate._spectral``: assumptions and
+      accuracy there). Needed for :class:`HydrodynamicFriction` (frequency-dependent
+      friction has no Markovian form in x); harmonic trap, one exposure window, no
+      timing jitter. Cost O(n log n) per trace.
 
     **Arguments:** (SI units; `k`, `gamma`, `exposure`, `frame_interval`, `temperature` and
     `tracking_std` broadcast together to a grid shape ``G``)
@@ -229,19 +270,25 @@ def simulate(
       an array of keys broadcastable to ``G`` gives each grid point its own stream.
     - `temperature`: T [K] (> 0).
     - `n_traces`: independent trajectories per grid point (int >= 1).
-    - `method`: ``"exact"``, ``"euler"`` or ``"exact_frames"``.
+    - `method`: ``"exact"``, ``"euler"``, ``"exact_frames"`` or ``"spectral"``.
     - `substeps`: substeps per exposure (per longest window with :class:`ExposureWindows`);
-      ``None`` picks the smallest count with estimated relative variance bias <= 1e-3.
-      Not used by ``"exact_frames"``.
+      ``None`` picks the smallest count with estimated relative variance bias <= 1e-3,
+      rounded up to the next power of two (at least 4): the count is a static scan length,
+      so rounding lets parameter values within a factor ~2 (exact: ~4 in alpha, the count
+      grows like sqrt(alpha)) share one compiled kernel; the bias only gets smaller.
+      Not used by ``"exact_frames"`` and ``"spectral"``.
     - `tracking_std`: white tracking noise std eps [m] (>= 0); same as
       ``injections=(TrackingNoise(eps),)`` but broadcast over the grid.
     - `injections`: tuple of :class:`AbstractInjection` (applied after the scan, in order, each
-      with its own key) and at most one :class:`TimingJitter` (applied in the loop).
+      with its own key), at most one :class:`TimingJitter` (applied in the loop), at most one
+      :class:`PhotodiodeFilter` (``"exact_frames"`` or ``"spectral"``) and at most one
+      :class:`HydrodynamicFriction` (``"spectral"``).
     - `exposure_profile`: callable ``p(u)``, ``u = t/W`` in [0, 1], weighting the exposure
       (e.g. :class:`TrapezoidProfile`, :class:`ExponentialProfile`); substep methods and a
       single window only.
     - `force`, `force_params`: see ``"euler"``. `force` must be elementwise in `x`.
-    - `burn_in_frames`: frames simulated and discarded before the first returned frame.
+    - `burn_in_frames`: frames simulated and discarded before the first returned frame
+      (unnecessary for the exact samplers, which start in the stationary state).
     - `dtype`: ``float32`` or ``float64`` (default: JAX's default float).
     - `bias_tol`: warn (:class:`SubstepBiasWarning`) when the estimated relative variance bias
       of the substep scheme exceeds this (default 0.05, i.e. ``h/tau > 0.1`` for euler).
@@ -313,15 +360,45 @@ def simulate(
 
     # --- injections --------------------------------------------------------------------
     jitters = [inj for inj in injections if isinstance(inj, TimingJitter)]
-    additive = [inj for inj in injections if not isinstance(inj, TimingJitter)]
+    diodes = [inj for inj in injections if isinstance(inj, PhotodiodeFilter)]
+    hydros = [inj for inj in injections if isinstance(inj, HydrodynamicFriction)]
+    additive = [inj for inj in injections
+                if not isinstance(inj, (TimingJitter, PhotodiodeFilter, HydrodynamicFriction))]
     for inj in additive:
         if not isinstance(inj, AbstractInjection):
             raise ValueError(
-                f"injections must be AbstractInjection or TimingJitter objects; got {inj!r}"
+                "injections must be AbstractInjection, TimingJitter, PhotodiodeFilter or "
+                f"HydrodynamicFriction objects; got {inj!r}"
             )
-    if len(jitters) > 1:
-        raise ValueError("at most one TimingJitter may be given in injections")
+    for name, found in (("TimingJitter", jitters), ("PhotodiodeFilter", diodes),
+                        ("HydrodynamicFriction", hydros)):
+        if len(found) > 1:
+            raise ValueError(f"at most one {name} may be given in injections")
     jitter = bool(jitters) and float(np.max(np.asarray(jitters[0].std))) > 0
+    photodiode = diodes[0] if diodes else None
+    hydro = hydros[0] if hydros else None
+    special = method == "spectral" or photodiode is not None
+    if hydro is not None and method != "spectral":
+        raise ValueError(
+            "HydrodynamicFriction (frequency-dependent friction) has no Markovian simulation in "
+            f"the position alone: use method='spectral'; got method = {method!r}"
+        )
+    if photodiode is not None and method not in ("exact_frames", "spectral"):
+        raise ValueError(
+            "PhotodiodeFilter needs method='exact_frames' (exact joint linear system) or "
+            f"'spectral'; got method = {method!r}"
+        )
+    if special:
+        what = f"method={method!r}" if method == "spectral" else "PhotodiodeFilter"
+        if windows:
+            raise ValueError(f"{what} supports a single exposure window, not ExposureWindows")
+        if jitter:
+            raise ValueError(f"{what} does not support TimingJitter (regular frames only)")
+        if method == "spectral" and substeps is not None:
+            raise ValueError("substeps is not used by method='spectral' (it has none); got "
+                             f"substeps = {substeps!r}")
+        if method == "spectral" and exposure_profile is not None:
+            raise ValueError("exposure_profile needs a substep method ('exact' or 'euler')")
 
     if method == "exact_frames":
         if substeps is not None:
@@ -360,130 +437,138 @@ def simulate(
     rdead = (dtf - w_max) / tau
     rdead = np.maximum(rdead, 0.0)
 
-    P = {"rdead": rdead}
-    if method == "exact_frames":
-        e, p, sm, cx, sx = co.segment_law(L)
-        P.update(e=e, p=p, sm=sm, cx=cx, sx=sx)
-        # window j (sorted) = sum_{s <= j} L_s m_s / a_j
-        M = np.where(
-            np.arange(n_seg)[:, None] <= np.arange(n_win)[None, :],
-            L[:, :, None] / a_win[:, None, :],
-            0.0,
-        )
-        P["M"] = M[:, :, np.argsort(order)]  # back to the user's window order
-        n_exp, n_dead = 0, 1
-    else:
-        if substeps is None:
-            a_max = float(a_win[:, -1].max())
-            if method == "exact":
-                n_tot = math.ceil(math.sqrt(a_max / (6 * _AUTO_BIAS * float(co.s_blur(a_max)))))
-            else:
-                n_tot = math.ceil(a_max / (2 * _AUTO_BIAS))
-            n_tot = max(n_tot, 4)
-        else:
-            n_tot = _count("substeps", substeps)
-        if windows:
-            seg_n = [max(1, round(n_tot * s / ends[-1])) for s in seg_len_s]
-        else:
-            seg_n = [n_tot]
-        n_exp = int(sum(seg_n))
-        h = np.concatenate([np.repeat(L[:, j : j + 1] / seg_n[j], seg_n[j], axis=1) for j in range(n_seg)], axis=1)
-        # trapezoid weights of each window over the grid points 0..n_exp
-        cum = np.cumsum(seg_n)
-        Wt = np.zeros((G, n_exp + 1, n_win))
-        for j in range(n_win):
-            hj = h[:, : cum[j]]
-            Wt[:, : cum[j], j] += hj / 2
-            Wt[:, 1 : cum[j] + 1, j] += hj / 2
-        if exposure_profile is not None:
-            u = np.concatenate([np.zeros((G, 1)), np.cumsum(h, axis=1)], axis=1) / L[:, :1]
-            prof = np.asarray(exposure_profile(u), dtype=np.float64)
-            if prof.shape != u.shape or not np.all(np.isfinite(prof)) or np.any(prof < 0):
-                raise ValueError(
-                    "exposure_profile(u) must return finite weights >= 0 of u's shape"
-                )
-            Wt = Wt * prof[:, :, None]
-        norm = Wt.sum(axis=1, keepdims=True)
-        if np.any(norm <= 0):
-            raise ValueError("exposure_profile has zero total weight over the exposure")
-        Wt = Wt / norm
-        P["Wt"] = Wt[:, :, np.argsort(order)]
-        if method == "exact":
-            P["A"], P["B"] = co.ou_step(h)
-            n_dead = 1
-            bias = co.trapezoid_bias(a_win, cum[None, :])
-        else:
-            P["A"], P["B"] = h, np.sqrt(2.0 * h)
-            hmax = h.max(axis=1)
-            n_dead = max(1, math.ceil(float(np.max(rdead / hmax)) - 1e-9)) if rdead.max() > 0 else 1
-            bias = co.euler_bias(hmax)[:, None] + co.trapezoid_bias(a_win, cum[None, :])
-            P["sigma"], P["k"] = sigma, kf
-        worst = float(np.max(bias))
-        if worst > bias_tol:
-            i = np.unravel_index(np.argmax(bias), bias.shape)
-            hrel = float(np.max(h, axis=1)[i[0]])
-            warnings.warn(
-                f"substeps = {n_tot} is too coarse for method={method!r}: h/tau = {hrel:.3g}, "
-                f"estimated relative bias of var(X_m) ~ {worst:.3g} > bias_tol = {bias_tol:g}; "
-                "increase substeps (or use method='exact_frames' for a harmonic trap)",
-                SubstepBiasWarning,
-                stacklevel=2,
+    if not special:
+        P = {"rdead": rdead}
+        if method == "exact_frames":
+            e, p, sm, cx, sx = co.segment_law(L)
+            P.update(e=e, p=p, sm=sm, cx=cx, sx=sx)
+            # window j (sorted) = sum_{s <= j} L_s m_s / a_j
+            M = np.where(
+                np.arange(n_seg)[:, None] <= np.arange(n_win)[None, :],
+                L[:, :, None] / a_win[:, None, :],
+                0.0,
             )
-    if jitter:
-        P["jstd"] = np.broadcast_to(np.asarray(jitters[0].std, np.float64), (G,)) / tau
-    P = {name: jnp.asarray(v, dtype=dtype) for name, v in P.items()}
+            P["M"] = M[:, :, np.argsort(order)]  # back to the user's window order
+            n_exp, n_dead = 0, 1
+        else:
+            if substeps is None:
+                a_max = float(a_win[:, -1].max())
+                if method == "exact":
+                    n_tot = math.ceil(math.sqrt(a_max / (6 * _AUTO_BIAS * float(co.s_blur(a_max)))))
+                else:
+                    n_tot = math.ceil(a_max / (2 * _AUTO_BIAS))
+                # next power of two (the bias only gets smaller): nearby parameter values
+                # share the static scan length, so new values seldom recompile
+                n_tot = 1 << (max(n_tot, 4) - 1).bit_length()
+            else:
+                n_tot = _count("substeps", substeps)
+            if windows:
+                seg_n = [max(1, round(n_tot * s / ends[-1])) for s in seg_len_s]
+            else:
+                seg_n = [n_tot]
+            n_exp = int(sum(seg_n))
+            h = np.concatenate([np.repeat(L[:, j : j + 1] / seg_n[j], seg_n[j], axis=1) for j in range(n_seg)], axis=1)
+            # trapezoid weights of each window over the grid points 0..n_exp
+            cum = np.cumsum(seg_n)
+            Wt = np.zeros((G, n_exp + 1, n_win))
+            for j in range(n_win):
+                hj = h[:, : cum[j]]
+                Wt[:, : cum[j], j] += hj / 2
+                Wt[:, 1 : cum[j] + 1, j] += hj / 2
+            if exposure_profile is not None:
+                u = np.concatenate([np.zeros((G, 1)), np.cumsum(h, axis=1)], axis=1) / L[:, :1]
+                prof = np.asarray(exposure_profile(u), dtype=np.float64)
+                if prof.shape != u.shape or not np.all(np.isfinite(prof)) or np.any(prof < 0):
+                    raise ValueError(
+                        "exposure_profile(u) must return finite weights >= 0 of u's shape"
+                    )
+                Wt = Wt * prof[:, :, None]
+            norm = Wt.sum(axis=1, keepdims=True)
+            if np.any(norm <= 0):
+                raise ValueError("exposure_profile has zero total weight over the exposure")
+            Wt = Wt / norm
+            P["Wt"] = Wt[:, :, np.argsort(order)]
+            if method == "exact":
+                P["A"], P["B"] = co.ou_step(h)
+                n_dead = 1
+                bias = co.trapezoid_bias(a_win, cum[None, :])
+            else:
+                P["A"], P["B"] = h, np.sqrt(2.0 * h)
+                hmax = h.max(axis=1)
+                n_dead = max(1, math.ceil(float(np.max(rdead / hmax)) - 1e-9)) if rdead.max() > 0 else 1
+                bias = co.euler_bias(hmax)[:, None] + co.trapezoid_bias(a_win, cum[None, :])
+                P["sigma"], P["k"] = sigma, kf
+            worst = float(np.max(bias))
+            if worst > bias_tol:
+                i = np.unravel_index(np.argmax(bias), bias.shape)
+                hrel = float(np.max(h, axis=1)[i[0]])
+                warnings.warn(
+                    f"substeps = {n_tot} is too coarse for method={method!r}: h/tau = {hrel:.3g}, "
+                    f"estimated relative bias of var(X_m) ~ {worst:.3g} > bias_tol = {bias_tol:g}; "
+                    "increase substeps (or use method='exact_frames' for a harmonic trap)",
+                    SubstepBiasWarning,
+                    stacklevel=2,
+                )
+        if jitter:
+            P["jstd"] = np.broadcast_to(np.asarray(jitters[0].std, np.float64), (G,)) / tau
+        P = {name: jnp.asarray(v, dtype=dtype) for name, v in P.items()}
 
     # --- keys ----------------------------------------------------------------------------
     keys = jnp.broadcast_to(keys, shape).reshape(G) if keys.ndim else jnp.broadcast_to(keys, (G,))
     sub = jax.vmap(lambda kk: jr.split(kk, 4))(keys)
     k_init, k_frames, k_jit, k_inj = sub[:, 0], sub[:, 1], sub[:, 2], sub[:, 3]
 
-    mesh = _make_mesh(shard, n_traces)
-    cfg = CoreConfig(
-        method=method,
-        n_exp=n_exp,
-        n_dead=n_dead,
-        n_seg=n_seg,
-        n_win=n_win,
-        jitter=jitter,
-        force=force,
-        dtype=dtype.name,
-        mesh=mesh,
-        unroll=unroll,
-        normal_dtype=(dtype if normal_dtype is None else _resolve_dtype(normal_dtype)).name,
-    )
-    x = jax.vmap(lambda kk: jr.normal(kk, (n_traces,), dtype))(k_init)
-    if jitter:
-        delta = P["jstd"][:, None] * jitter_normals(k_jit, 0, n_traces, dtype)
+    if special:
+        frames = _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau,
+                                 burn_in_frames + n_frames, n_traces, dtype, k_init,
+                                 k_frames)[..., burn_in_frames:][:, None]
     else:
-        delta = jnp.zeros((G, 1), dtype)
-    if mesh is not None:
-        x = jax.device_put(x, NamedSharding(mesh, PartitionSpec(None, "traces")))
-
-    total = burn_in_frames + n_frames
-    if chunk_frames is None:
-        per_frame = G * n_traces * cfg.n_rows
-        chunk = max(1, min(total, (1 << 22) // max(per_frame, 1)))
-    else:
-        chunk = min(_count("chunk_frames", chunk_frames), total)
-    n_chunks = -(-total // chunk)
-    fp = force_params if force is not None else None
-    outs, douts = [], []
-    t0 = time.perf_counter()
-    for c in range(n_chunks):
-        x, delta, acc, deltas = run_chunk_jit(
-            cfg, chunk, P, fp, k_frames, k_jit, x, delta, jnp.int32(c * chunk)
+        mesh = _make_mesh(shard, n_traces)
+        cfg = CoreConfig(
+            method=method,
+            n_exp=n_exp,
+            n_dead=n_dead,
+            n_seg=n_seg,
+            n_win=n_win,
+            jitter=jitter,
+            force=force,
+            dtype=dtype.name,
+            mesh=mesh,
+            unroll=unroll,
+            normal_dtype=(dtype if normal_dtype is None else _resolve_dtype(normal_dtype)).name,
         )
-        lo = max(burn_in_frames - c * chunk, 0)
-        hi = min(total - c * chunk, chunk)
-        if hi > lo:
-            outs.append(jnp.moveaxis(acc[lo:hi], 0, -1))  # (G, n_win, T, n)
-            if jitter:
-                douts.append(jnp.moveaxis(deltas[lo:hi], 0, -1))  # (G, T, n)
-        if progress:
-            jax.block_until_ready(x)
-            _progress(c + 1, n_chunks, t0, sys.stderr)
-    frames = outs[0] if len(outs) == 1 else jnp.concatenate(outs, axis=-1)
+        x = jax.vmap(lambda kk: jr.normal(kk, (n_traces,), dtype))(k_init)
+        if jitter:
+            delta = P["jstd"][:, None] * jitter_normals(k_jit, 0, n_traces, dtype)
+        else:
+            delta = jnp.zeros((G, 1), dtype)
+        if mesh is not None:
+            x = jax.device_put(x, NamedSharding(mesh, PartitionSpec(None, "traces")))
+
+        total = burn_in_frames + n_frames
+        if chunk_frames is None:
+            per_frame = G * n_traces * cfg.n_rows
+            chunk = max(1, min(total, (1 << 22) // max(per_frame, 1)))
+        else:
+            chunk = min(_count("chunk_frames", chunk_frames), total)
+        n_chunks = -(-total // chunk)
+        fp = force_params if force is not None else None
+        outs, douts = [], []
+        t0 = time.perf_counter()
+        for c in range(n_chunks):
+            x, delta, acc, deltas = run_chunk_jit(
+                cfg, chunk, P, fp, k_frames, k_jit, x, delta, jnp.int32(c * chunk)
+            )
+            lo = max(burn_in_frames - c * chunk, 0)
+            hi = min(total - c * chunk, chunk)
+            if hi > lo:
+                outs.append(jnp.moveaxis(acc[lo:hi], 0, -1))  # (G, n_win, T, n)
+                if jitter:
+                    douts.append(jnp.moveaxis(deltas[lo:hi], 0, -1))  # (G, T, n)
+            if progress:
+                jax.block_until_ready(x)
+                _progress(c + 1, n_chunks, t0, sys.stderr)
+        frames = outs[0] if len(outs) == 1 else jnp.concatenate(outs, axis=-1)
     sig = jnp.asarray(sigma, dtype)[:, None, None, None]
     pos = frames * sig
     n_idx = jnp.arange(n_frames, dtype=dtype)

@@ -97,18 +97,17 @@ def test_simulate_new_key_and_parameters_no_recompile(compiles, kw):
     assert compiles.names == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="simulate(substeps=None) derives the number of substeps per exposure (a static scan "
-    "length in CoreConfig.n_exp) from the largest alpha = W k / gamma of the call, so new "
-    "parameter values of the same shapes recompile jit(run_chunk) (here 6 -> 9 substeps). "
-    "Documented behaviour of the automatic substep choice; pass substeps=N to avoid it.",
-)
 def test_simulate_auto_substeps_new_parameters_no_recompile(compiles):
-    bt.simulate(2e-5, GAMMA, 1e-4, DT, 1024, key=jax.random.key(0))
+    """substeps=None rounds the automatic substep count (a static scan length) up to a power
+    of two: k = 3e-5 and 8e-5 N/m (alpha = W k/gamma = 0.11 and 0.30, raw counts 5 and 8)
+    share the bucket of 8 substeps and must not recompile; k = 1.2e-4 (raw count 10, bucket
+    16) must, which shows the counter sees the scan length."""
+    bt.simulate(3e-5, GAMMA, 1e-4, DT, 1024, key=jax.random.key(0))
     compiles.reset()
-    bt.simulate(5e-5, GAMMA, 1e-4, DT, 1024, key=jax.random.key(1))
+    bt.simulate(8e-5, GAMMA, 1e-4, DT, 1024, key=jax.random.key(1))
     assert compiles.names == []
+    bt.simulate(1.2e-4, GAMMA, 1e-4, DT, 1024, key=jax.random.key(2))
+    assert compiles.names != []
 
 
 # ---- calibrate ----------------------------------------------------------------------------------
