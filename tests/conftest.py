@@ -10,10 +10,18 @@ import blurtrap  # noqa: E402
 
 blurtrap.enable_x64()
 # share compiled programs between the xdist workers (and between runs on one machine)
-blurtrap.enable_compilation_cache(
+_CACHE = os.path.abspath(blurtrap.enable_compilation_cache(
     os.environ.get("BLURTRAP_TEST_CACHE_DIR",
                    os.path.join(os.path.dirname(__file__), "..", ".pytest_cache", "jax"))
-)
+))
+# ... and with the processes the tests start: `blurtrap.cli.main` (in-process, it calls
+# enable_compilation_cache() with $BLURTRAP_CACHE_DIR), the notebook kernels (jax reads
+# JAX_COMPILATION_CACHE_DIR at import) and the subprocess tests (BLURTRAP_TEST_CACHE_DIR)
+os.environ["BLURTRAP_TEST_CACHE_DIR"] = _CACHE
+os.environ["BLURTRAP_CACHE_DIR"] = _CACHE
+os.environ["JAX_COMPILATION_CACHE_DIR"] = _CACHE
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = str(
+    jax.config.jax_persistent_cache_min_compile_time_secs)
 
 
 @pytest.fixture

@@ -64,6 +64,14 @@ def test_demo_quick(tmp_path, capsys):
     assert "failed" not in steps.values()
 
 
+def _tiny_demo_config(demo_mod):
+    """The quick demo's sizes (its compiled simulator and fits are reused), fewer steps."""
+    import dataclasses
+
+    return dataclasses.replace(demo_mod.quick_config(), exact_likelihood=False, posterior=True,
+                               psd_models=(), per_power_variance=False, power_exposures=())
+
+
 def test_demo_table_progress_and_posterior(tmp_path, capsys, monkeypatch):
     """Without --json: progress on stderr, the lab-unit table on stdout; a posterior is used
     when `blurtrap.inference.sample_posterior` exists (tiny config, stand-in sampler)."""
@@ -85,9 +93,7 @@ def test_demo_table_progress_and_posterior(tmp_path, capsys, monkeypatch):
                               "gamma": 2.74e-8 * (1 + 0.02 * rng.standard_normal(400))})
 
     monkeypatch.setattr(inference, "sample_posterior", fake_sample_posterior, raising=False)
-    tiny = demo_mod.DemoConfig(n_frames=4096, fig1_frames=1000, exact_likelihood=False,
-                               posterior=True, psd_models=(), per_power_variance=False,
-                               power_exposures=())
+    tiny = _tiny_demo_config(demo_mod)
     monkeypatch.setattr(demo_mod, "quick_config", lambda seed=0: tiny)
     rc = main(["demo", "--quick", "--out", str(tmp_path)])
     cap = capsys.readouterr()
@@ -105,9 +111,7 @@ def test_demo_without_posterior_says_so(tmp_path, capsys, monkeypatch):
     import blurtrap.inference as inference
 
     monkeypatch.delattr(inference, "sample_posterior", raising=False)
-    tiny = demo_mod.DemoConfig(n_frames=4096, fig1_frames=1000, exact_likelihood=False,
-                               posterior=True, psd_models=(), per_power_variance=False,
-                               power_exposures=())
+    tiny = _tiny_demo_config(demo_mod)
     summary = demo_mod.demo(tmp_path, quiet=True, config=tiny)
     assert summary["posterior"] == "posterior: not available in this version"
     assert "posterior: not available in this version" in (tmp_path / "report.md").read_text()

@@ -166,7 +166,7 @@ def test_batch_bad_n_blocks(n_blocks):
 def test_stiff_trap_without_temporal_information_is_not_called_free_diffusion():
     """k = 1 pN/nm at 1500 fps: dt = 50 tau. An explicit likelihood fit runs k towards 0;
     the error must name the real cause (no temporal information), not free diffusion."""
-    r = _rec(1e-3, 2048, seed=0)
+    r = _rec(1e-3, 4096, seed=0)  # 4096 frames: the exact fit compiled for the tests above
     for kw in (dict(method="likelihood", likelihood="exact"), dict(method="psd")):
         with pytest.raises(FitError, match="cannot identify gamma") as exc:
             bt.calibrate(r, **kw)

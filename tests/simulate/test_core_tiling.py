@@ -5,7 +5,7 @@ import jax
 import numpy as np
 import pytest
 
-from blurtrap.simulate import ExposureWindows, _core, simulate
+from blurtrap.simulate import ExposureWindows, _core, _simulate, simulate
 
 K, TAU = 5e-5, 0.537e-3
 CASES = [
@@ -16,20 +16,36 @@ CASES = [
 
 @pytest.mark.parametrize("method, kw", CASES, ids=[c[0] for c in CASES])
 def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
+    tiles = []  # the tile sizes run_chunk was traced with
+    tile_size, run_chunk = _core.tile_size, _core.run_chunk
+
+    def recorded_tile_size(cfg, n_traj):
+        tiles.append(tile_size(cfg, n_traj))
+        return tiles[-1]
+
+    monkeypatch.setattr(_core, "tile_size", recorded_tile_size)
+
     def run(tile_bytes):
         monkeypatch.setattr(_core, "_TILE_BYTES", tile_bytes)
-        jax.clear_caches()  # the tile size is read when run_chunk is traced
-        return np.asarray(simulate(K, K * TAU, frame_interval=TAU, n_frames=6,
-                                   key=jax.random.key(5), n_traces=700, method=method,
-                                   chunk_frames=4, **kw))
+        # a fresh jit of a fresh run_chunk (jax caches traces per function), as the tile size
+        # is read when run_chunk is traced; unlike jax.clear_caches(), this keeps the other
+        # tests' compiled programs in this worker
+        monkeypatch.setattr(_core, "run_chunk", lambda *args: run_chunk(*args))
+        monkeypatch.setattr(_simulate, "run_chunk_jit", _core._jit_for_cpu())
+        tiles.clear()
+        x = np.asarray(simulate(K, K * TAU, frame_interval=TAU, n_frames=6,
+                                key=jax.random.key(5), n_traces=700, method=method,
+                                chunk_frames=4, **kw))
+        return x, set(tiles)
 
-    untiled = run(1 << 40)
-    tiled = run(256)  # tiles of 256 trajectories: 3 tiles, the last one padded
+    untiled, untiled_tiles = run(1 << 40)
+    tiled, tiled_tiles = run(256)  # tiles of 256 trajectories: 3 tiles, the last one padded
+    # both runs were traced, one without and one with tiles
+    assert untiled_tiles == {None} and tiled_tiles == {256}, (untiled_tiles, tiled_tiles)
     # the scan really ran in tiles (exact: 10 rows per frame, exact_frames: 4)
     rows = {"exact": (9, 1, 1), "exact_frames": (0, 1, 2)}[method]
     cfg = _core.CoreConfig(method, rows[0], rows[1], rows[2], rows[2], False, None, "float64",
                            None, 1, "float64")
-    assert _core.tile_size(cfg, 700) == 256
-    jax.clear_caches()
+    assert tile_size(cfg, 700) == 256
     np.testing.assert_array_equal(tiled, untiled)
     assert np.all(np.isfinite(tiled)) and np.std(tiled) > 0
