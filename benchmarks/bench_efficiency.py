@@ -115,6 +115,7 @@ def main(argv=None):
         raw = json.loads(pathlib.Path(a.replot).read_text())
         cells = {(c["r"], c["wf"]): c for c in raw["cells"]}
         series = {c["r"]: c for c in raw["series"]}
+        pathlib.Path(a.out).mkdir(parents=True, exist_ok=True)
         make_plot(pathlib.Path(a.out), cells, series)
         return
     n_ex = a.seeds if a.exact_seeds is None else min(a.exact_seeds, a.seeds)

@@ -32,7 +32,8 @@ Every fit is timed in wall time and in process CPU time (all threads; robust to 
 a shared machine). ``--data DIR`` saves the simulated traces (or reuses them), ``--raw FILE``
 saves every per-trace result; ``--replot FILE [FILE ...]`` rewrites the tables and figures
 from raw files, merging rows of later files (e.g. from ``--blurtrap-only "METHOD"`` run on the
-same ``--data``) into the first.
+same ``--data``) into the first. ``--max-frames N`` truncates the traces (smoke runs of
+``run_all.sh --smoke`` only; the labels then say so).
 """
 
 from __future__ import annotations
@@ -106,7 +107,14 @@ def machine_info() -> dict:
                                 text=True, cwd=pathlib.Path(__file__).parent).stdout.strip()
     except OSError:  # pragma: no cover
         commit = ""
+    try:
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True,
+                               cwd=pathlib.Path(__file__).parent).stdout.count("\n")
+    except OSError:  # pragma: no cover
+        dirty = None
     return {"date": datetime.datetime.now().isoformat(timespec="seconds"), "cpu": cpu,
+            "dirty_files": dirty, "blurtrap_path": str(pathlib.Path(bt.__file__).parent),
             "cores": os.cpu_count(), "platform": platform.platform(),
             "python": sys.version.split()[0], "blurtrap": bt.__version__, "commit": commit,
             "devices": [str(d) for d in jax.devices()], "load_start": os.getloadavg(), **vers}
@@ -114,7 +122,12 @@ def machine_info() -> dict:
 
 def machine_line(m: dict) -> str:
     return (f"{m['date']}; CPU {m['cpu']}, {m['cores']} cores, devices {m['devices']}; "
-            f"Python {m['python']}, blurtrap {m['blurtrap']} (commit {m['commit']}), jax "
+            f"Python {m['python']}, blurtrap {m['blurtrap']} (commit {m['commit']}"
+            + (f" + {m['dirty_files']} modified tracked files" if m.get("dirty_files") else "")
+            + (f", package imported from {m['blurtrap_path']}"
+               if m.get("blurtrap_path") and m["blurtrap_path"] != str(
+                   pathlib.Path(__file__).resolve().parent.parent / "blurtrap") else "")
+            + f"), jax "
             f"{m['jax']}, numpy {m['numpy']}, scipy {m['scipy']}, optimistix {m['optimistix']}, "
             f"equinox {m['equinox']}, emcee {m['emcee']}; load average at start "
             f"{m['load_start'][0]:.1f}")
@@ -136,7 +149,8 @@ def cached_set(data_dir, name, ds, k, n_traces, seed):
     path = pathlib.Path(data_dir) / f"{name}.npz"
     if path.exists():
         z = np.load(path)
-        if z["x"].shape[0] >= n_traces and int(z["seed"]) == seed and float(z["k"]) == k:
+        if (z["x"].shape[0] >= n_traces and z["x"].shape[1] == ds["n"]
+                and int(z["seed"]) == seed and float(z["k"]) == k):
             return np.asarray(z["x"][:n_traces], dtype=np.float64)
     y = simulate_set(ds, k, n_traces, seed)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -216,6 +230,18 @@ def fmt_stat(s):
     return f"{s['bias']:+.2f} ({z:+.1f}) | {s['sd']:.2f} | {sesd}"
 
 
+def _cap_frames(max_frames):
+    """``--max-frames``: truncate the data sets (smoke runs) and say so in their labels."""
+    if max_frames is None:
+        return
+    if max_frames < 1024:
+        raise SystemExit(f"--max-frames: got {max_frames}, expected >= 1024")
+    for ds in DATASETS.values():
+        if ds["n"] > max_frames:
+            ds["n"] = max_frames
+            ds["label"] += f" [SMOKE: truncated to {max_frames} frames]"
+
+
 # ------------------------------------------------------------------------------------------
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -236,10 +262,15 @@ def main(argv=None):
     ap.add_argument("--blurtrap-only", default=None, metavar="METHODS",
                     help="comma-separated blurtrap method names to run (no peers, no "
                          "posterior); for supplementing a --raw file, same seeds")
+    ap.add_argument("--max-frames", type=int, default=None, metavar="N",
+                    help="cap the frames per trace (smoke runs only: the tables then no longer "
+                         "describe the data sets of the issue, and the labels say so)")
     a = ap.parse_args(argv)
+    _cap_frames(a.max_frames)
     if a.replot:
         raws = [json.loads(pathlib.Path(f).read_text()) for f in a.replot]
         raw = raws[0]
+        _cap_frames(raw["args"].get("max_frames"))
         results = {(d, k): v for d, k, v in raw["results"]}
         supp = []
         for extra in raws[1:]:
@@ -354,7 +385,7 @@ def main(argv=None):
     mach["wall_s"] = time.time() - t_start
     if a.raw:
         pathlib.Path(a.raw).write_text(json.dumps({
-            "args": {"seeds": a.seeds, "mcmc_steps": a.mcmc_steps,
+            "args": {"seeds": a.seeds, "mcmc_steps": a.mcmc_steps, "max_frames": a.max_frames,
                      "photodiode_exact_seeds": a.photodiode_exact_seeds},
             "machine": mach, "peer_versions": vers, "peer_python": peer_py, "post": post,
             "results": [[d, k, v] for (d, k), v in results.items()]}))
@@ -380,7 +411,9 @@ def write_results(out_dir, a, mach, vers, results, post, peer_py, supplements=()
     for names, m in supplements:
         L.append(f"Rows {', '.join(names)}: measured on the same seeds in a supplementary run "
                  f"(`--blurtrap-only`), {m['date']}, load average {m['load_start'][0]:.1f} at "
-                 f"start, {m['load_end'][0]:.1f} at end (commit {m['commit']}).\n")
+                 f"start, {m['load_end'][0]:.1f} at end (commit {m['commit']}"
+                 + (f"; blurtrap imported from {m['blurtrap_path']}" if m.get("blurtrap_path")
+                    else "") + ").\n")
     if vers is None:
         L.append("**Peers not run**: no peer interpreter (`BLURTRAP_PEER_PYTHON`).\n")
     else:
@@ -465,8 +498,16 @@ def write_results(out_dir, a, mach, vers, results, post, peer_py, supplements=()
                      f"{np.median(c) / ref['cpu']:.2f} |")
     L.append("\nThe peers run in their own process (separate venv), so peer/blurtrap ratios "
              "are between processes on the same machine in the same run, not within one "
-             "process. For the photodiode set at k = 0.01 pN/nm, blurtrap's `auto` chooses the "
-             "exact likelihood (see its `notes`), hence its larger median there.\n")
+             "process.")
+    for dname in DATASETS:
+        for k in KS:
+            r = results[(dname, k)]
+            d, e = r.get("blurtrap default (auto)"), r.get("blurtrap exact likelihood")
+            if d and e and np.median(d["cpu"]) > 0.3 * np.median(e["cpu"]):
+                L.append(f"For the {dname} set at k = {k * 1e3:g} pN/nm, blurtrap's `auto` "
+                         "chose the exact likelihood (Whittle leakage index >= 1, see the "
+                         "result's `notes`), hence its larger time there.")
+    L.append("")
     if post:
         L.append(f"\n## Posterior: 32 walkers x {a.mcmc_steps} steps, one camera trace "
                  "(k = 0.05 pN/nm, 65 536 frames)\n")

@@ -265,7 +265,8 @@ def main(argv=None):
     ap.add_argument("--full", action="store_true", help="all powers of 2, bigger batches")
     ap.add_argument("--repeat", type=int, default=None)
     ap.add_argument("--skip-devices", action="store_true")
-    ap.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--smoke", action="store_true",
+                    help="tiny sizes (N = 2^12-2^17, batches <= 20): code paths only, for run_all.sh")
     ap.add_argument("--gpu", action="store_true", help="accelerator section only")
     ap.add_argument("--gpu-scale", type=float, default=1.0,
                     help="shrink the --gpu sizes (e.g. 0.001 for a CPU smoke test)")

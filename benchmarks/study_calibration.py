@@ -174,6 +174,7 @@ def fmt(x, p=2):
 
 # ------------------------------------------------------------------------------------------
 def main(argv=None):
+    global N_FRAMES
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="few seeds (smoke run, ~2 min)")
     ap.add_argument("--seeds", type=int, default=300, help="seeds per k for the loop methods")
@@ -182,9 +183,17 @@ def main(argv=None):
     ap.add_argument("--exact-seeds", type=int, default=100)
     ap.add_argument("--grid-seeds", type=int, default=200)
     ap.add_argument("--fig", default="benchmarks/calibration_study.png")
+    ap.add_argument("--frames", type=int, default=N_FRAMES, help="frames per recording")
+    ap.add_argument("--smoke", action="store_true",
+                    help="every code path at the smallest sizes (8192 frames, 2-5 seeds); the "
+                         "numbers are meaningless")
     a = ap.parse_args(argv)
     if a.quick:
         a.seeds, a.default_seeds, a.exact_seeds, a.grid_seeds = 40, 60, 8, 40
+    if a.smoke:  # >= 5 default seeds: the batch-vs-single check uses 5 rows
+        a.seeds, a.default_seeds, a.exact_seeds, a.grid_seeds, a.frames = 3, 5, 2, 3, 8192
+    N_FRAMES = a.frames
+    nf = f"{N_FRAMES:,}".replace(",", " ")
     a.default_seeds = max(a.default_seeds, a.seeds)
     warnings.simplefilter("ignore", bt.SubstepBiasWarning)
     t_start = time.time()
@@ -197,7 +206,7 @@ def main(argv=None):
     print("| k [pN/nm] | N | CRB k, Whittle [%] | CRB k, exact [%] | CRB gamma, Whittle [%] "
           "| CRB gamma, exact [%] | CRB eps2, Whittle [%] | CRB eps2, exact [%] |")
     print("|---|---|---|---|---|---|---|---|")
-    n_chk = 1024 if a.quick else 2048
+    n_chk = 1024 if (a.quick or a.smoke) else 2048
     for k in (1e-5, 5e-5):
         cw = crb(k, GAMMA, EPS2, DT, DT, n_chk)
         ce = np.sqrt(np.diag(np.linalg.inv(exact_fisher_dense(k, GAMMA, EPS2, DT, DT, n_chk))))
@@ -256,7 +265,7 @@ def main(argv=None):
                              abs(b.k_err[i] / r.k_err - 1)))
         study[k]["batch_vs_single"] = max(diffs)
 
-    print("\n## Main study: bias, spread and error bars (N = 65 536, W = dt = 1/1500 s, "
+    print(f"\n## Main study: bias, spread and error bars (N = {nf}, W = dt = 1/1500 s, "
           "eps = 2 nm)\n")
     print("bias z = bias / (Monte-Carlo SE of the mean); SE/SD = mean reported SE / observed SD "
           "(its own MC uncertainty is about 1/sqrt(2n)); SD/CRB uses the Whittle expected "
@@ -293,7 +302,7 @@ def main(argv=None):
             m, se_, mx, sb, sbe, s3, s3e = d["pair"][col]
             print(f"| {k * 1e3:g} | {pn} | {ne} | {m:+.4f} | {se_:.4f} | {mx:.4f} | "
                   f"{sb:+.3f} +- {sbe:.3f} | {s3:+.3f} +- {s3e:.3f} |")
-    print("\n## CRB at N = 65 536 and wall time of each method's loop\n")
+    print(f"\n## CRB at N = {nf} and wall time of each method's loop\n")
     print("| k [pN/nm] | CRB k [%] | CRB gamma [%] | CRB eps2 [%] | max rel diff batch vs "
           "calibrate (5 rows) |")
     print("|---|---|---|---|---|")
@@ -310,7 +319,7 @@ def main(argv=None):
 
     # ---- grid of alpha and dt/tau (default method) ------------------------------------------
     print(f"\n## Grid: default method (calibrate_batch, Whittle), {a.grid_seeds} seeds per cell, "
-          "N = 65 536, dt = 1/1500 s, eps = 2 nm\n")
+          f"N = {nf}, dt = 1/1500 s, eps = 2 nm\n")
     print("| k [pN/nm] | W/dt | dt/tau | alpha = W/tau | fails | k bias [%] | k bias [MC SE] | "
           "k SD [%] | k CRB [%] | k SD/CRB | k SE/SD (median SE/SD) | gamma bias [%] | "
           "gamma bias [MC SE] | gamma SD [%] | gamma CRB [%] | gamma SD/CRB | gamma SE/SD "
@@ -405,7 +414,7 @@ def make_figure(study, grid, path):
         a.set_xticks(x, [lab.replace(", ", "\n").replace(" (", "\n(").replace(" e", "\ne")
                          for lab in labels], fontsize=7)
         a.set_ylabel(f"bias of {pn} [%] (symlog; bars: 2 MC SE)")
-        a.set_title(f"{pn}: bias by method (65 536 frames, W = dt = 1/1500 s, eps = 2 nm)",
+        a.set_title(f"{pn}: bias by method ({N_FRAMES} frames, W = dt = 1/1500 s, eps = 2 nm)",
                     fontsize=9)
         a.legend(fontsize=8)
     a = ax[1, 0]

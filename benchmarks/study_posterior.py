@@ -1,6 +1,7 @@
 """Posterior sampling study: speed, compilation, and credible-interval coverage.
 
 Run:  python benchmarks/study_posterior.py [--datasets 200] [--steps 2000] [--out DIR]
+                                          [--timing-steps 2000]
 
 1. Timing on one 65 536-frame camera recording (dt = W = 1/1500 s):
    - per-call cost of the batched log-posterior (16 and 32 walkers: the two shapes emcee
@@ -182,22 +183,23 @@ def per_call_study(y) -> dict:
     return out
 
 
-def timing_study() -> dict:
+def timing_study(n_steps: int = 2000) -> dict:
     from blurtrap.inference import _posterior as pm
 
     ys = simulate([2e-5, 2e-5, 3e-5], seed=99)
     n0 = pm.trace_count()
     t0 = time.perf_counter()
-    first = pm.sample_posterior(rec(ys[0]), n_walkers=32, n_steps=2000, seed=0)
+    first = pm.sample_posterior(rec(ys[0]), n_walkers=32, n_steps=n_steps, seed=0)
     t_first = time.perf_counter() - t0
     n_first = pm.trace_count() - n0
     runs = []
     for i in (1, 2, 1, 2):
         t0 = time.perf_counter()
-        p = pm.sample_posterior(rec(ys[i]), n_walkers=32, n_steps=2000, seed=i)
+        p = pm.sample_posterior(rec(ys[i]), n_walkers=32, n_steps=n_steps, seed=i)
         runs.append({"total_s": time.perf_counter() - t0, **p.timing,
                      "load_average": os.getloadavg()[0]})
     return {
+        "n_steps": n_steps,
         "compile_s": first.timing["compile_s"],
         "first_call_total_s": t_first,
         "first_call_sampling_s": first.timing["sampling_s"],
@@ -329,6 +331,8 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--out", default="benchmarks/out")
     ap.add_argument("--skip-timing", action="store_true")
+    ap.add_argument("--timing-steps", type=int, default=2000,
+                    help="steps of the 32-walker timing runs (smoke runs: fewer)")
     a = ap.parse_args(argv)
     blurtrap.enable_x64()
     out = pathlib.Path(a.out)
@@ -336,7 +340,7 @@ def main(argv=None):
     res = {"machine": machine_info()}
     print(json.dumps(res["machine"], indent=1), flush=True)
     if not a.skip_timing:
-        res["timing"] = timing_study()
+        res["timing"] = timing_study(a.timing_steps)
         print(json.dumps(res["timing"], indent=1), flush=True)
         (out / "posterior_study.json").write_text(json.dumps(res, indent=1))
     if a.datasets > 0:

@@ -7,6 +7,8 @@ silent failure and is listed. The simulation is blurtrap's exact frame sampler.
 
     python benchmarks/study_robustness.py            # quick grid (~10 min on 2 cores)
     python benchmarks/study_robustness.py --seeds 3  # more seeds
+    python benchmarks/study_robustness.py --smoke    # 3 stiffnesses x 2 blurs x 2 noises, 2048
+                                                     # frames, all three methods (~36 fits)
 
 Writes a table to stdout and (with ``--out``) a JSON file of every case.
 """
@@ -63,10 +65,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--smoke", action="store_true",
+                    help="smallest grid that still covers every method and both extremes")
     a = ap.parse_args(argv)
     bt.enable_x64()
     ks = np.logspace(-11, -3, 9)  # 1e-8 ... 1 pN/nm
-    grid = list(itertools.product(ks, (0.02, 1.0), (0.0, 2e-9, 20e-9), (2048, 65536),
+    eps_grid, lengths = (0.0, 2e-9, 20e-9), (2048, 65536)
+    if a.smoke:
+        ks, eps_grid, lengths = np.logspace(-11, -3, 3), (0.0, 20e-9), (2048,)
+    grid = list(itertools.product(ks, (0.02, 1.0), eps_grid, lengths,
                                   range(a.seeds),
                                   (("auto", None), ("likelihood", "exact"), ("psd", None))))
     rows, t0 = [], time.time()
