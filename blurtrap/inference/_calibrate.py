@@ -326,6 +326,37 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
     return res
 
 
+#: a blocked-PSD fit needs blocks at least this many relaxation times long
+_PSD_MIN_BLOCK_TAU = 20.0
+
+
+def _check_psd_blocks(res, recs, n_blocks, explicit):
+    """Blocks shorter than ~20 tau leave few, strongly correlated ordinates below the corner
+    frequency; the Gamma likelihood of the block averages then treats them as independent
+    and reports errors that are far too small (measured: 2048-frame records with tau = T/10
+    in one block gave gamma 6-9 SE low, benchmarks/study_robustness.py). With the default
+    block count this is an error (the record itself is too short for a PSD fit); with a
+    user's `n_blocks` a note."""
+    g = res.gamma
+    if not math.isfinite(g):
+        return res
+    for r, kk in zip(recs, res.k_per_recording):
+        m = r.n_frames // n_blocks
+        ratio = m * float(r.frame_interval) / (g / float(kk))
+        if ratio >= _PSD_MIN_BLOCK_TAU:
+            continue
+        msg = (f"psd: blocks of {m} frames are only {ratio:.3g} relaxation times "
+               f"(tau = gamma/k = {g / float(kk):.3g} s) long, fewer than "
+               f"{_PSD_MIN_BLOCK_TAU:g}: neighbouring ordinates are correlated and the "
+               "blocked-PSD errors would be far too small")
+        if explicit:
+            return dataclasses.replace(res, notes=res.notes + (
+                msg + "; use fewer blocks (n_blocks) or method='likelihood'",))
+        raise FitError(msg + ". The record is too short for a blocked PSD fit: use "
+                       "method='likelihood' (exact for any record length).")
+    return res
+
+
 def _check_fit(out, names, method, strict=True, notes=None, recs=None):
     hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
     if not bool(out.converged):
@@ -803,9 +834,13 @@ def calibrate(
             n_min = min(r.n_frames for r in recs)
             t_min = min(r.n_frames * float(r.frame_interval) for r in recs)
             nb = max(1, min(128, n_min // 64, int(t_min / (100.0 * max(taus)))))
+            # a power of two: the block length (an array shape) then takes few values across
+            # records, so new recordings rarely recompile the fit
+            nb = 1 << (nb.bit_length() - 1)
             notes.append(f"psd: {nb} blocks of {n_min // nb} frames (>= 100 tau each where "
                          "the record allows)")
-        return _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict)
+        res = _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict)
+        return _check_psd_blocks(res, recs, int(nb), explicit=n_blocks is not None)
     if method in ("variance_vs_exposure", "variance_vs_power"):
         if method == "variance_vs_power" and k != "linear_power":
             warnings.warn("variance_vs_power is usually run with k='linear_power'", stacklevel=2)

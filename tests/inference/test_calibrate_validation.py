@@ -180,3 +180,20 @@ def test_f_range_is_never_ignored(rec):
     assert any("f_range given" in n for n in res.notes), res.notes
     f = res.extras["f"][res.extras["weight"] > 0]
     assert f.min() >= 5.0 and f.max() <= 700.0
+
+
+def test_psd_on_a_record_too_short_for_blocks_is_refused():
+    # 2048 frames, tau = gamma/k = 0.137 s = T/10 (k = 1e-4 pN/nm): one block of 10 tau.
+    # The blocked-PSD fit of such records put gamma 6-9 SE low with a small SE
+    # (benchmarks/study_robustness.py); it must refuse and point to the likelihood, which
+    # must give an honest answer on the same record.
+    k = 1e-7
+    x = bt.simulate(k, GAMMA, DT, DT, 2048, key=jax.random.key(0), method="exact_frames")
+    rec = bt.Recording(np.asarray(x[0]), frame_interval=DT, exposure=DT)
+    with pytest.raises(FitError, match=r"relaxation times.*method='likelihood'"):
+        bt.calibrate(rec, method="psd")
+    # a user's explicit block count is respected, with the warning in the notes
+    res = bt.calibrate(rec, method="psd", n_blocks=1)
+    assert any("relaxation times" in n and "n_blocks" in n for n in res.notes)
+    exact = bt.calibrate(rec, method="likelihood", likelihood="exact")
+    assert abs(exact.gamma - GAMMA) < 4 * exact.gamma_err
