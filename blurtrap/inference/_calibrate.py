@@ -271,7 +271,7 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
         weight=jnp.asarray(pad(ws, 0.0)),
         log_ref=jnp.asarray(np.log(ref)),
         block_len=(jnp.asarray(np.array(ms, dtype=float))
-                   if model.alias and model.closed_form else None),
+                   if model.alias else None),
     )
 
 
@@ -326,15 +326,20 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
     return res
 
 
-#: a blocked-PSD fit needs blocks at least this many relaxation times long
+#: a blocked-PSD fit needs blocks at least this many relaxation times long, and a leakage
+#: index sqrt(M) tau/T_block (see `_leakage_index`) of at most this: a 65 536-frame record
+#: fitted in one block at index 7.1 (k = 1e-5 pN/nm, dt = W = 1/1500 s, T = 32 tau) put
+#: gamma 5.6 SE low, while the photodiode peer set (index 1.5, 8 blocks) is honest
 _PSD_MIN_BLOCK_TAU = 20.0
+_PSD_LEAKAGE_MAX = 3.0
 
 
 def _check_psd_blocks(res, recs, n_blocks, explicit):
     """Blocks shorter than ~20 tau leave few, strongly correlated ordinates below the corner
     frequency; the Gamma likelihood of the block averages then treats them as independent
     and reports errors that are far too small (measured: 2048-frame records with tau = T/10
-    in one block gave gamma 6-9 SE low, benchmarks/study_robustness.py). With the default
+    in one block gave gamma 6-9 SE low, benchmarks/study_robustness.py), and so do long
+    records in one block when the leakage index is large. With the default
     block count this is an error (the record itself is too short for a PSD fit); with a
     user's `n_blocks` a note."""
     g = res.gamma
@@ -343,12 +348,14 @@ def _check_psd_blocks(res, recs, n_blocks, explicit):
     for r, kk in zip(recs, res.k_per_recording):
         m = r.n_frames // n_blocks
         ratio = m * float(r.frame_interval) / (g / float(kk))
-        if ratio >= _PSD_MIN_BLOCK_TAU:
+        leak = math.sqrt(m) / ratio
+        if ratio >= _PSD_MIN_BLOCK_TAU and leak <= _PSD_LEAKAGE_MAX:
             continue
         msg = (f"psd: blocks of {m} frames are only {ratio:.3g} relaxation times "
-               f"(tau = gamma/k = {g / float(kk):.3g} s) long, fewer than "
-               f"{_PSD_MIN_BLOCK_TAU:g}: neighbouring ordinates are correlated and the "
-               "blocked-PSD errors would be far too small")
+               f"(tau = gamma/k = {g / float(kk):.3g} s) long (leakage index sqrt(M) tau/T = "
+               f"{leak:.2g}; needed: >= {_PSD_MIN_BLOCK_TAU:g} tau and index <= "
+               f"{_PSD_LEAKAGE_MAX:g}): neighbouring ordinates are correlated and the "
+               "blocked-PSD estimates and errors cannot be trusted")
         if explicit:
             return dataclasses.replace(res, notes=res.notes + (
                 msg + "; use fewer blocks (n_blocks) or method='likelihood'",))

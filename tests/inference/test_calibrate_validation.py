@@ -197,3 +197,12 @@ def test_psd_on_a_record_too_short_for_blocks_is_refused():
     assert any("relaxation times" in n and "n_blocks" in n for n in res.notes)
     exact = bt.calibrate(rec, method="likelihood", likelihood="exact")
     assert abs(exact.gamma - GAMMA) < 4 * exact.gamma_err
+
+
+def test_psd_in_one_long_block_with_large_leakage_is_refused():
+    # 65 536 frames, k = 1e-5 pN/nm: one block of ~36 tau, leakage index sqrt(M) tau/T = 7.1.
+    # The one-block fit put gamma 5.6 SE low (benchmarks/study_robustness.py, seed 0).
+    x = bt.simulate(1e-8, GAMMA, DT, DT, 65536, key=jax.random.key(0), method="exact_frames")
+    rec = bt.Recording(np.asarray(x[0]), frame_interval=DT, exposure=DT)
+    with pytest.raises(FitError, match=r"leakage index .*method='likelihood'"):
+        bt.calibrate(rec, method="psd")
