@@ -235,7 +235,8 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
     expectation is the exact expected periodogram of a block of M frames (the Fejer-kernel
     leakage of the finite block included, same cost as P_d): for blocked spectra and for the
     full-record Whittle likelihood alike, so that records that are not long compared with
-    tau are not biased. Models with extra effects use P_d(f) (leakage O(tau/T))."""
+    tau are not biased. Other aliased models (detector filter, frequency-dependent friction,
+    exposure shape) use P_d(f) plus the closed-form trap's leakage (``TrapModel.psd``)."""
     fs, ps, ws, ms = [], [], [], []
     for r in recs:
         nb = max(int(n_blocks), 1)
