@@ -131,8 +131,7 @@ class TrapModel(eqx.Module):
         (or broadcast). Per-recording coefficients are computed once and broadcast.
         ``s2 = sin^2(pi f dt)`` may be precomputed. With ``block_len`` (frames per block,
         shape (R,)) a closed-form aliased model returns the exact *expected periodogram* of a
-        block of that length (finite-block leakage included) instead of P_d(f); other aliased
-        models add the leakage of the closed-form trap with the same parameters."""
+        block of that length (finite-block leakage included) instead of P_d(f)."""
         extras = extras or {}
         sigma2 = BOLTZMANN * temperature / k
         tau = gamma / k * jnp.ones_like(sigma2)
@@ -154,20 +153,6 @@ class TrapModel(eqx.Module):
                 out = lor * jnp.sinc(f * col(w)) ** 2 + col(e2) * col(dt)
         else:
             out = self._psd_folded(f, sigma2, tau, w, dt, temperature, extras) + col(e2 * dt)
-            if self.alias and block_len is not None:
-                # Finite-block leakage (Fejer kernel and mean removal): it carries power from
-                # the low frequencies, where the filter, the frequency-dependent friction and
-                # the exposure shape are all ~1, into the whole band. It is taken from the
-                # closed-form trap with the same sigma2, tau, W, dt (expected periodogram minus
-                # P_d); without it the expected periodogram of a 2^14-sample 100 kHz record
-                # with a photodiode filter is underestimated by ~1.5 % near Nyquist (6 % at
-                # 2^12), enough to fail the goodness of fit of the true model.
-                z = jnp.zeros_like(sigma2)
-                leak = _expected_block_periodogram(f, col(block_len), col(sigma2), col(tau),
-                                                   col(w), col(dt), col(z))
-                dt_, omr, rho, c_a, c_b, _ = (col(c) for c in _psd_coeffs(sigma2, tau, w, dt, z))
-                s2_ = jnp.sin(jnp.pi * f * dt_) ** 2 if s2 is None else s2
-                out = out + (leak - dt_ * (c_a - s2_ * c_b) / (omr**2 + 4.0 * rho * s2_))
         for e in self.extra:
             if e.kind == "additive":
                 out = out + e.psd_add(f, col(dt), extras)
