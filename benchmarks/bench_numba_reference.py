@@ -57,6 +57,7 @@ except ImportError as exc:  # pragma: no cover - depends on the interpreter
     _reexec_or_skip(repr(exc))
 
 sys.path.insert(0, str(HERE))
+from _machine import cpu_model  # noqa: E402
 from bench_simulate import DT, TAU, W, numpy_reference  # noqa: E402
 
 
@@ -137,12 +138,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     n_sub, rows = a.substeps, a.substeps + 1
     c, s, cd, sd, w = _coefficients(n_sub)
-    try:
-        cpu = next(ln.split(":", 1)[1].strip() for ln in
-                   pathlib.Path("/proc/cpuinfo").read_text().splitlines()
-                   if ln.startswith("model name"))
-    except (OSError, StopIteration):  # pragma: no cover
-        cpu = platform.processor()
+    cpu = cpu_model()
     print(f"# bench_numba_reference {datetime.datetime.now().isoformat(timespec='seconds')}; "
           f"CPU {cpu}, {os.cpu_count()} cores; Python {platform.python_version()} "
           f"({sys.executable}), numba {numba.__version__}, numpy {np.__version__}; float64, "

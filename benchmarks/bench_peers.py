@@ -53,6 +53,7 @@ import warnings
 
 import jax
 import numpy as np
+from _machine import cpu_model
 
 import blurtrap as bt
 from blurtrap.physics._constants import BOLTZMANN
@@ -87,14 +88,7 @@ def machine_info() -> dict:
     """CPU model, cores, versions, date and load (recorded next to every figure)."""
     import importlib.metadata as md
 
-    cpu = platform.processor()
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:  # pragma: no cover
-        pass
+    cpu = cpu_model()
     vers = {}
     for name in ("jax", "jaxlib", "numpy", "scipy", "optimistix", "equinox", "emcee",
                  "matplotlib"):

@@ -35,6 +35,7 @@ import tempfile
 import time
 
 import numpy as np
+from _machine import cpu_model
 
 K, TAU = 5e-5, 0.537e-3
 GAMMA = K * TAU
@@ -143,13 +144,7 @@ def _child(args, extra_env=None):
 
 
 def _machine():
-    model = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{model}, {os.cpu_count()} CPUs, affinity {sorted(os.sched_getaffinity(0))}"
+    return f"{cpu_model()}, {os.cpu_count()} CPUs, affinity {sorted(os.sched_getaffinity(0))}"
 
 
 def main():

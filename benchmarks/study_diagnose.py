@@ -33,6 +33,7 @@ import time
 
 import jax
 import numpy as np
+from _machine import cpu_model
 
 import blurtrap as bt
 
@@ -301,14 +302,7 @@ def machine_info():
     import equinox
     import jaxlib
 
-    cpu = platform.processor()
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:  # pragma: no cover
-        pass
+    cpu = cpu_model()
     return {"date": datetime.datetime.now().isoformat(timespec="seconds"), "cpu": cpu,
             "cpu_count": os.cpu_count(), "platform": platform.platform(),
             "python": sys.version.split()[0], "jax": jax.__version__,

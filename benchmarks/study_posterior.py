@@ -46,6 +46,7 @@ import warnings
 
 import jax
 import numpy as np
+from _machine import cpu_model
 
 import blurtrap
 
@@ -62,14 +63,7 @@ def machine_info() -> dict:
     import equinox
     import jaxlib
 
-    cpu = platform.processor()
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:  # pragma: no cover
-        pass
+    cpu = cpu_model()
     return {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "cpu": cpu,
