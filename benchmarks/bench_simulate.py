@@ -41,6 +41,7 @@ K, TAU = 5e-5, 0.537e-3
 GAMMA = K * TAU
 W, DT = 0.5 * TAU, 1.0 * TAU
 CHUNK_BUDGET = 1 << 22  # simulate's default: about 4 M substep-trajectories per chunk
+CHUNK_BUDGET_EXACT_FRAMES = 1 << 26  # ... and 2^26 / 2 frame-trajectories for exact_frames
 
 
 def numpy_reference(n_traj, n_frames, n_sub, dtype, seed=0):
@@ -73,13 +74,13 @@ def _clock(fn):
     return time.perf_counter() - t, time.process_time() - c
 
 
-def _chunk(n_traj, rows, total):
-    return max(1, min(total, CHUNK_BUDGET // (n_traj * rows)))
+def _chunk(n_traj, rows, total, budget=CHUNK_BUDGET):
+    return max(1, min(total, budget // (n_traj * rows)))
 
 
-def _whole_chunks(n_traj, rows, wanted):
+def _whole_chunks(n_traj, rows, wanted, budget=CHUNK_BUDGET):
     """`wanted` frames rounded to whole default chunks (at least one chunk)."""
-    ch = _chunk(n_traj, rows, 1 << 30)
+    ch = _chunk(n_traj, rows, 1 << 30, budget)
     if wanted <= ch:
         return wanted
     return ch * max(1, round(wanted / ch))
@@ -97,7 +98,35 @@ def _peak_mb():
         return next(int(ln.split()[1]) for ln in f if ln.startswith("VmHWM")) / 1024
 
 
+def _status_mb(field):
+    with open("/proc/self/status") as f:
+        return next(int(ln.split()[1]) for ln in f if ln.startswith(field + ":")) / 1024
+
+
+class _AnonPoll:
+    """Largest anonymous (private, not file-backed) resident memory seen, polled every 2 ms in a
+    thread: the kernel keeps no high-water mark for RssAnon. File-backed pages (RssFile) are
+    jaxlib's shared-library code mapped from disk, shared between processes and reclaimable."""
+
+    def __init__(self):
+        import threading
+
+        self.peak, self._stop = _status_mb("RssAnon"), threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+        self._t.start()
+
+    def _run(self):
+        while not self._stop.wait(0.002):
+            self.peak = max(self.peak, _status_mb("RssAnon"))
+
+    def stop(self):
+        self._stop.set()
+        self._t.join()
+        return max(self.peak, _status_mb("RssAnon"))
+
+
 def memory_child(n_traj, n_frames, n_sub, cache):
+    poll = _AnonPoll()
     stages = {"python + numpy": _rss_mb()}
     import jax
 
@@ -121,7 +150,8 @@ def memory_child(n_traj, n_frames, n_sub, cache):
     el = time.perf_counter() - t0
     stages["after the run"] = _rss_mb()
     peak = _peak_mb()
-    print(json.dumps({"stages_MB": stages, "peak_MB": peak,
+    anon = {"peak_anon_MB": poll.stop(), "file_MB": _status_mb("RssFile")}
+    print(json.dumps({"stages_MB": stages, "peak_MB": peak, **anon,
                       "run_increment_MB": peak - max(base_peak, stages["first call (compile)"]),
                       "seconds": el, "output_MB": x.nbytes / 2**20,
                       "substeps": n_traj * n_frames * (n_sub + 1)}))
@@ -200,7 +230,7 @@ def main():
             if n == 1:
                 n_frames = min(n_frames, 2000)
             n_frames = _whole_chunks(n, rows, n_frames)
-            nf_f = _whole_chunks(n, 2, 50 * n_frames)  # exact_frames: 50x the frames
+            nf_f = _whole_chunks(n, 2, 50 * n_frames, CHUNK_BUDGET_EXACT_FRAMES)  # exact_frames: 50x the frames
             work = n * n_frames * rows
             first = _clock(lambda: jax_call(n, n_frames, dtype, "exact", 0))[0]
             first_f = _clock(lambda: jax_call(n, nf_f, dtype, "exact_frames", 0))[0]
@@ -249,7 +279,8 @@ def main():
         for label, m in (("fresh process", mem), ("warm compile cache", mem_cached)):
             st = ", ".join(f"{k} {v:.0f}" for k, v in m["stages_MB"].items())
             print(f"memory ({label}), {m['substeps']:.3g} substeps: peak RSS "
-                  f"{m['peak_MB']:.0f} MB; run increment {m['run_increment_MB']:.0f} MB; "
+                  f"{m['peak_MB']:.0f} MB (anonymous {m['peak_anon_MB']:.0f} MB, file-backed "
+                  f"jaxlib code {m['file_MB']:.0f} MB); run increment {m['run_increment_MB']:.0f} MB; "
                   f"output {m['output_MB']:.1f} MB; {m['seconds']:.1f} s; RSS by stage [MB]: {st}")
         print(f"memory (NumPy reference, same run): peak RSS {mem_np['peak_MB']:.0f} MB, increment "
               f"{mem_np['run_increment_MB']:.0f} MB over {mem_np['base_MB']:.0f} MB, "

@@ -2,6 +2,7 @@ r"""Brownian dynamics of a trapped bead with in-loop exposure averaging: :func:`
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -12,11 +13,12 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
+from jax import lax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ..physics import BOLTZMANN, DEFAULT_TEMPERATURE
 from . import _coeffs as co
-from ._core import CoreConfig, jitter_normals, run_chunk_jit
+from ._core import CoreConfig, buffer_traces, jitter_normals, run_chunk_jit
 from ._injections import (
     AbstractInjection,
     HydrodynamicFriction,
@@ -158,6 +160,24 @@ def _progress(done, total, t0, stream):
     stream.flush()
 
 
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
+def _start(keys, n_traces, dtype, buf_shape):
+    """Per grid point: the keys of the initial state, the frames, the jitter and the injections,
+    the stationary initial positions (units of sigma) and the zeroed output buffer (one
+    compiled call: eager splits and zeros cost ~1 ms each)."""
+    sub = jax.vmap(lambda kk: jr.split(kk, 4))(keys)
+    x = jax.vmap(lambda kk: jr.normal(kk, (n_traces,), dtype))(sub[:, 0])
+    buf = None if buf_shape is None else jnp.zeros(buf_shape, dtype)
+    return sub[:, 0], sub[:, 1], sub[:, 2], sub[:, 3], x, buf
+
+
+@functools.partial(jax.jit, donate_argnums=0)
+def _place(buf, chunk, start):
+    """``buf[..., start : start + n] = chunk`` in place (`buf` is donated)."""
+    idx = (jnp.zeros((), jnp.int32),) * (buf.ndim - 1) + (jnp.asarray(start, jnp.int32),)
+    return lax.dynamic_update_slice(buf, chunk, idx)
+
+
 def _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau, n, n_traces, dtype,
                     k_init, k_frames):
     """Frames (G, T, n) in units of sigma from the exact photodiode system or the spectral
@@ -293,7 +313,9 @@ def simulate(
     - `bias_tol`: warn (:class:`SubstepBiasWarning`) when the estimated relative variance bias
       of the substep scheme exceeds this (default 0.05, i.e. ``h/tau > 0.1`` for euler).
     - `chunk_frames`: frames per compiled chunk (default: about 4 M substep-trajectories per
-      chunk). Long runs (1e9 substeps) run chunk by chunk in bounded memory.
+      chunk; ``"exact_frames"``: 32 M frame-trajectories, or 2 M with `progress`). Long runs
+      (1e9 substeps) run chunk by chunk in bounded memory: the chunks are placed into one
+      output buffer in place, so memory is the output plus one chunk.
     - `progress`: print a text progress bar to stderr, updated once per chunk.
     - `shard`: ``"auto"`` (default) shards the traces axis across all local devices when there
       are several and ``n_traces`` is a multiple of their number; ``True`` requires it;
@@ -511,17 +533,17 @@ def simulate(
                 )
         if jitter:
             P["jstd"] = np.broadcast_to(np.asarray(jitters[0].std, np.float64), (G,)) / tau
-        P = {name: jnp.asarray(v, dtype=dtype) for name, v in P.items()}
+        P["scale"] = sigma  # the frames are written in metres
+        P = jax.device_put({name: np.asarray(v, dtype=dtype) for name, v in P.items()})
 
     # --- keys ----------------------------------------------------------------------------
     keys = jnp.broadcast_to(keys, shape).reshape(G) if keys.ndim else jnp.broadcast_to(keys, (G,))
-    sub = jax.vmap(lambda kk: jr.split(kk, 4))(keys)
-    k_init, k_frames, k_jit, k_inj = sub[:, 0], sub[:, 1], sub[:, 2], sub[:, 3]
-
     if special:
+        k_init, k_frames, k_jit, k_inj, x, _ = _start(keys, n_traces, dtype.name, None)
         frames = _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau,
                                  burn_in_frames + n_frames, n_traces, dtype, k_init,
                                  k_frames)[..., burn_in_frames:][:, None]
+        pos = frames * jnp.asarray(sigma, dtype)[:, None, None, None]
     else:
         mesh = _make_mesh(shard, n_traces)
         cfg = CoreConfig(
@@ -537,51 +559,66 @@ def simulate(
             unroll=unroll,
             normal_dtype=(dtype if normal_dtype is None else _resolve_dtype(normal_dtype)).name,
         )
-        x = jax.vmap(lambda kk: jr.normal(kk, (n_traces,), dtype))(k_init)
+        total = burn_in_frames + n_frames
+        if chunk_frames is None:
+            # substeps: ~4 M substep-trajectories of random numbers per chunk. exact_frames
+            # needs O(G T) working memory whatever the chunk, so its chunks are only there to
+            # bound one call's output (32 M frame-trajectories) and to feed the progress bar
+            per_frame = G * n_traces * cfg.n_rows
+            budget = 1 << (26 if method == "exact_frames" and not progress else 22)
+            chunk = max(1, min(total, budget // max(per_frame, 1)))
+        else:
+            chunk = min(_count("chunk_frames", chunk_frames), total)
+        n_chunks = -(-total // chunk)
+        # each chunk comes out in the user's shape (reshapes inside the jitted chunk are free,
+        # eager ones copy); several chunks are placed into one donated buffer; a partial last
+        # chunk is computed in full
+        n_buf = n_chunks * chunk
+        t_buf = buffer_traces(cfg, n_traces)
+        lead = tuple(shape) + ((n_win,) if windows else ())
+        k_init, k_frames, k_jit, k_inj, x, buf = _start(
+            keys, n_traces, dtype.name, lead + (t_buf, n_buf) if n_chunks > 1 else None)
         if jitter:
             delta = P["jstd"][:, None] * jitter_normals(k_jit, 0, n_traces, dtype)
         else:
             delta = jnp.zeros((G, 1), dtype)
+        fp = force_params if force is not None else None
+        dbuf = jnp.zeros((G, n_traces, n_buf), dtype) if jitter and n_chunks > 1 else None
         if mesh is not None:
             x = jax.device_put(x, NamedSharding(mesh, PartitionSpec(None, "traces")))
-
-        total = burn_in_frames + n_frames
-        if chunk_frames is None:
-            per_frame = G * n_traces * cfg.n_rows
-            chunk = max(1, min(total, (1 << 22) // max(per_frame, 1)))
-        else:
-            chunk = min(_count("chunk_frames", chunk_frames), total)
-        n_chunks = -(-total // chunk)
-        fp = force_params if force is not None else None
-        outs, douts = [], []
         t0 = time.perf_counter()
         for c in range(n_chunks):
-            x, delta, acc, deltas = run_chunk_jit(
-                cfg, chunk, P, fp, k_frames, k_jit, x, delta, jnp.int32(c * chunk)
+            x, delta, out, dout = run_chunk_jit(
+                cfg, chunk, lead, P, fp, k_frames, k_jit, x, delta, jnp.int32(c * chunk)
             )
-            lo = max(burn_in_frames - c * chunk, 0)
-            hi = min(total - c * chunk, chunk)
-            if hi > lo:
-                outs.append(jnp.moveaxis(acc[lo:hi], 0, -1))  # (G, n_win, T, n)
+            if n_chunks == 1:
+                buf, dbuf = out, dout
+            else:
+                buf = _place(buf, out, c * chunk)
                 if jitter:
-                    douts.append(jnp.moveaxis(deltas[lo:hi], 0, -1))  # (G, T, n)
+                    dbuf = _place(dbuf, dout, c * chunk)
             if progress:
                 jax.block_until_ready(x)
                 _progress(c + 1, n_chunks, t0, sys.stderr)
-        frames = outs[0] if len(outs) == 1 else jnp.concatenate(outs, axis=-1)
-    sig = jnp.asarray(sigma, dtype)[:, None, None, None]
-    pos = frames * sig
-    n_idx = jnp.arange(n_frames, dtype=dtype)
-    dtj = jnp.asarray(dtf, dtype)
+        exact_fit = t_buf == n_traces and burn_in_frames == 0 and n_buf == n_frames
+        pos = buf if exact_fit else buf[..., :n_traces, burn_in_frames:total]
+        if jitter:
+            dj = dbuf if exact_fit else dbuf[:, :n_traces, burn_in_frames:total]
+    out_shape = tuple(shape) + ((n_win,) if windows else ()) + (n_traces, n_frames)
     if jitter:
-        dj = douts[0] if len(douts) == 1 else jnp.concatenate(douts, axis=-1)
-        times = n_idx * dtj[:, None, None] + dj * jnp.asarray(tau, dtype)[:, None, None]
+        n_idx = jnp.arange(n_frames, dtype=dtype)
+        times = (n_idx * jnp.asarray(dtf, dtype)[:, None, None]
+                 + dj * jnp.asarray(tau, dtype)[:, None, None])
+    elif return_times or additive:
+        times = jnp.broadcast_to(jnp.asarray(np.arange(n_frames) * dtf[:, None, None], dtype),
+                                 (G, 1, n_frames))
     else:
-        times = jnp.broadcast_to(n_idx * dtj[:, None, None], (G, 1, n_frames))
+        times = None  # not needed
 
     # --- additive injections (per grid point, each with its own key) ----------------------
     if additive or eps_.any():
         epsj = jnp.asarray(epsf, dtype)
+        pos = pos.reshape(G, n_win, n_traces, n_frames)
 
         def inject(xg, tg, kg, eg):
             ks = jr.split(kg, len(additive) + 1)
@@ -592,8 +629,8 @@ def simulate(
 
         pos = jax.vmap(inject)(pos, times, k_inj, epsj)
 
-    out_shape = tuple(shape) + ((n_win,) if windows else ()) + (n_traces, n_frames)
-    pos = pos.reshape(out_shape)
+    if pos.shape != out_shape:
+        pos = pos.reshape(out_shape)
     if return_times:
         tshape = tuple(shape) + ((1,) if windows else ()) + (times.shape[-2], n_frames)
         return pos, times.reshape(tshape)
