@@ -411,6 +411,12 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         if values[names.index("tracking_var")] < 1e-6 * c0:
             at_bounds.append("tracking_var")
     temps = {float(r.temperature) for r in recs}
+    if "drift_diffusion" in names:
+        notes = tuple(notes) + (
+            "drift_diffusion: its standard error is ~3x too small (half the drift power is the "
+            "record's one end-to-end ramp, so the periodogram ordinates are not independent; "
+            "the docstring of blurtrap.inference.EFFECTS['drift']); treat it as an order of "
+            "magnitude. The errors of k, gamma and eps^2 stay calibrated.",)
     return CalibrationResult(
         method=method,
         model=model.name,

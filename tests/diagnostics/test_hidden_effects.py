@@ -56,6 +56,9 @@ def test_hidden_drift():
     d = bt.diagnose(record(2, injections=(bt.RandomWalkDrift(2e-16),)))
     check_hidden(d, "drift")
     assert "drift" in d.ranking[0].evidence and "Hz" in d.ranking[0].evidence
+    # the drift diffusion's error is known to be too small: the fit says so
+    assert any(n.startswith("drift_diffusion: its standard error is ~3x too small")
+               for n in d.ranking[0].fit.notes), d.ranking[0].fit.notes
 
 
 def test_hidden_tracking_noise():
