@@ -257,6 +257,49 @@ def test_newton_stopping_rule_bounds_the_error(factor):
         assert int(k) > 30  # ran until the linear iteration had really converged
 
 
+def _boundary_pass(x, scale, args):
+    """f(x) = sum_{i<3}(exp(x_i) - c_i x_i) + exp(x_3): the last parameter's optimum is on its
+    boundary (u = exp(x_3) -> 0), where its log-space curvature exp(x_3) vanishes."""
+    e = jnp.exp(x)
+    g = jnp.concatenate([e[:3] - C, e[3:]])
+    return jnp.sum(e[:3] - C * x[:3]) + e[3], g, jnp.diag(e)
+
+
+def test_newton_converges_at_a_boundary_optimum():
+    # before: the boundary coordinate stepped on for ever with a merely semi-definite Hessian,
+    # the iteration never reported convergence and the BFGS fallback took over
+    tol = 1e-9
+    x, _, _, _, dx, k, done, _ = jax.jit(
+        lambda x0: _fit._newton_iterate(_boundary_pass, None, None, x0, tol, tol, 200)
+    )(jnp.full(4, 0.3))
+    assert bool(done) and int(k) < 200
+    x_hat = np.asarray(x - dx)
+    assert np.max(np.abs(x_hat[:3] - np.log(np.asarray(C)))) < 1e-8
+    # stopped only once the boundary term, the objective's excess over its infimum, no
+    # longer matters (Newton decrement below 1e-13 (1 + |f|))
+    assert math.exp(x_hat[3]) < 1e-10
+
+
+def test_standard_fit_of_a_hydrodynamic_record_finds_the_trap():
+    """Regression (benchmarks/study_diagnose.py, hydrodynamics seed 3504): a 200 kHz record of a
+    1.5 um bead with frequency-dependent friction, fitted with the standard model: eps^2 runs to
+    its boundary; the Newton fit never declared convergence, the BFGS fallback ran k to 6e-11
+    N/m (a worse likelihood) and calibrate raised a FitError. The misspecified fit must find
+    the trap's own optimum (k within 20 % of the truth, the hydrodynamic bias being ~16 %)."""
+    from blurtrap.physics._effects import water_viscosity
+    from blurtrap.simulate import HydrodynamicFriction
+
+    radius, k = 1.5e-6, 5e-5
+    gamma = 6 * math.pi * float(water_viscosity(295.0)) * radius
+    x = np.asarray(bt.simulate(k, gamma, 1e-8, 5e-6, 2**16, key=jax.random.key(3504),
+                               method="spectral", tracking_std=0.2e-9,
+                               injections=(HydrodynamicFriction(radius),)))[0]
+    rec = bt.Recording(x, frame_interval=5e-6, exposure=1e-8)
+    fit = bt.calibrate(rec, method="likelihood", likelihood="whittle")
+    assert abs(fit.k / k - 1) < 0.2, fit.summary()
+    assert "tracking_var" in fit.at_bounds
+
+
 # ------------------------------------------------------------------------------------------
 # chi^2 survival function on the host
 # ------------------------------------------------------------------------------------------
