@@ -3,6 +3,10 @@ hidden effect (strong and weak), and runtime per call.
 
 Run:  python benchmarks/study_diagnose.py [--seeds 40] [--effect-seeds 10] [--quick]
                                           [--only control,drift,...] [--out DIR]
+      python benchmarks/study_diagnose.py --filter-gof-null 300 [--filter-scenario ...]
+      python benchmarks/study_diagnose.py --filter-spectrum 2000 [--filter-scenario ...]
+(the last two: the refit gof null distribution and the spectrum check of the photodiode
+filter, see ``filter_gof_null`` and ``filter_spectrum``; RESULTS_diagnose.md section 4)
 
 All single-recording scenarios share one record length (N = 16384 frames, dt = W = 1/1500 s,
 k = 1e-5 N/m, gamma = 6 pi 0.00093 Pa s 1.53 um, eps = 2 nm) so compiled programs are reused,
@@ -283,6 +287,132 @@ def drift_pulls(n_seeds, d_drift=2e-16, seed0=7000):
           f"relative SE {r[:, 3].mean():.3f}; pull SD {((r[:, 2] - 1) / r[:, 3]).std(ddof=1):.2f}")
 
 
+FILTERS = {"detector_filter": (8e3, 0.4), "detector_filter_weak": (30e3, 0.6)}
+GOF_THRESHOLD_PD = 0.05 / 6  # diagnose's Bonferroni threshold on photodiode records (gof + 5 candidates)
+
+
+def filter_gof_null(n_seeds, scenario="detector_filter", seed0=90000):
+    """Null distribution of the goodness of fit of ``standard+detector_filter`` fitted to records
+    simulated with exactly that filter (the refit diagnose makes once it has named the
+    effect): Whittle fits from the closed-form start and from the truth (the lower NLL is
+    kept; a fit converging from neither is counted apart). Prints the fraction of records with
+    gof p below diagnose's threshold (the refit's false-failure rate), a KS test of the
+    p-values against uniform, and the k, gamma pulls."""
+    from scipy.stats import kstest
+
+    f3, al = FILTERS[scenario]
+    truth = {"k": K_PD, "gamma": GAMMA_PD, "tracking_var": EPS_PD**2, "f3db": f3,
+             "diode_alpha": al}
+    rows, failed, better_from_truth = [], [], 0
+    for s in range(seed0, seed0 + n_seeds):
+        rec = diode(s, f3, al)
+        fits = []
+        for start in (None, truth):
+            try:
+                fits.append(bt.calibrate(rec, method="likelihood", likelihood="whittle",
+                                         model="standard+detector_filter", start=start,
+                                         strict=False))
+            except bt.FitError:
+                fits.append(None)
+        ok = [f for f in fits if f is not None]
+        if not ok:
+            failed.append(s)
+            continue
+        fit = min(ok, key=lambda f: f.extras["nll"])
+        better_from_truth += fits[0] is None or fit.extras["nll"] < fits[0].extras["nll"] - 1e-6
+        rows.append((fit.gof["p_value"], fit.gof["statistic"], fit.gof["dof"],
+                     (fit.k - K_PD) / fit.k_err, (fit.gamma - GAMMA_PD) / fit.gamma_err))
+    r = np.array(rows, dtype=float)
+    n = len(r)
+    p = r[:, 0]
+    x = int(np.sum(p < GOF_THRESHOLD_PD))
+    pulls = r[np.all(np.isfinite(r[:, 3:]), axis=1)]
+    print(f"refit gof null, {scenario} (f3dB = {f3:g} Hz, alpha = {al}), seeds {seed0}-"
+          f"{seed0 + n_seeds - 1}: {n} fits ({len(failed)} converged from neither start: "
+          f"{failed}; truth start better in {better_from_truth})")
+    print(f"  gof p < {GOF_THRESHOLD_PD:.4f}: {x}/{n} = {100 * x / n:.1f} % ± "
+          f"{100 * se(x / n, n):.1f} % (independent exponential ordinates: ~1.1 %)")
+    print(f"  KS of p vs uniform: p = {kstest(p, 'uniform').pvalue:.3g}; deciles "
+          f"{np.histogram(p, bins=10, range=(0, 1))[0].tolist()}; smallest "
+          f"{np.round(np.sort(p)[:3], 5).tolist()}")
+    print(f"  statistic: mean {r[:, 1].mean():.1f} +- {r[:, 1].std(ddof=1) / math.sqrt(n):.1f} "
+          f"(dof {int(r[0, 2])}), SD {r[:, 1].std(ddof=1):.1f}")
+    print(f"  pulls ({len(pulls)} fits with finite SE): k mean {pulls[:, 3].mean():+.2f} SD "
+          f"{pulls[:, 3].std(ddof=1):.2f}; gamma mean {pulls[:, 4].mean():+.2f} SD "
+          f"{pulls[:, 4].std(ddof=1):.2f}")
+
+
+def filter_spectrum(n_records, scenario="detector_filter", n=2**14, seed=777000):
+    """Simulator and model against an independent reference for the photodiode-filtered
+    frames: the exact autocovariance c(m) of the continuous linear system (x, z) averaged over
+    the exposure (scipy expm / Lyapunov, not blurtrap code) gives P_d (infinite record) and the
+    exact expected periodogram E[I_j] of n frames. Prints, in 16 bands, model P_d / P_d(ref)
+    - 1 (alias tail), E[I]/P_d - 1 (finite-record leakage) and the Monte-Carlo mean of
+    n_records periodograms over E[I] and over the model P_d (z = (mean - 1)/SE, SE from the
+    spread over records)."""
+    import jax.numpy as jnp
+    from scipy.linalg import expm, solve_continuous_lyapunov
+
+    from blurtrap.inference._models import get_model
+    from blurtrap.physics import BOLTZMANN
+    from blurtrap.simulate import PhotodiodeFilter
+
+    f3, al = FILTERS[scenario]
+    dt, w, temp = 1e-5, W_PD, 295.0
+    tau = GAMMA_PD / K_PD
+    a = np.array([[-1 / tau, 0.0], [2 * math.pi * f3, -2 * math.pi * f3]])
+    p0 = solve_continuous_lyapunov(a, -np.diag([2 * BOLTZMANN * temp / GAMMA_PD, 0.0]))
+    c = np.array([al, 1 - al])
+    xg, wg = np.polynomial.legendre.leggauss(30)
+    s, ws = (xg + 1) / 2 * w, wg / 2 * w
+    # lag 0: (2/W^2) int_0^W (W - s) r(s) ds; lag m >= 1: c^T e^{A m dt} Q c with
+    # Q = W^-2 int_{-W}^{W} (W - |s|) e^{A s} ds P
+    c0 = 2 / w**2 * sum(wi * (w - si) * (c @ expm(a * si) @ p0 @ c) for si, wi in zip(s, ws))
+    q = sum(wi * (w - si) * (expm(a * si) + expm(-a * si)) for si, wi in zip(s, ws)) @ p0 / w**2
+    n_lag = 1 << 18
+    phi, vec, cm = expm(a * dt), q @ c, np.empty(n_lag)
+    for m in range(1, n_lag):
+        vec = phi @ vec
+        cm[m] = c @ vec
+    cm[0] = c0 + EPS_PD**2
+    j = np.arange(1, n // 2 + 1)
+    f = j / (n * dt)
+    pd_ref = dt * (2 * np.fft.rfft(cm).real - cm[0])[j * (n_lag // n)]
+    acm = (n - np.arange(n)) * cm[:n]
+    ei = dt / n * (2 * np.fft.rfft(acm).real - acm[0])[j]
+    one = lambda v: jnp.asarray([v])  # noqa: E731
+    model = np.asarray(get_model("standard+detector_filter").psd(
+        jnp.asarray(f)[None], one(K_PD), one(GAMMA_PD), EPS_PD**2, one(dt), one(w), one(temp),
+        extras={"f3db": f3, "diode_alpha": al}))[0]
+    per = []
+    for i in range(0, n_records, 100):
+        x = np.asarray(bt.simulate(K_PD, GAMMA_PD, w, dt, n, key=jax.random.key(seed + i),
+                                   n_traces=min(100, n_records - i), method="exact_frames",
+                                   tracking_std=EPS_PD,
+                                   injections=(PhotodiodeFilter(f3, al),))).reshape(-1, n)
+        x = x - x.mean(axis=1, keepdims=True)
+        per.append(np.abs(np.fft.rfft(x, axis=1)[:, 1:]) ** 2 * dt / n)
+    per = np.concatenate(per)
+    bands = np.array_split(np.arange(len(f)), 16)
+    print(f"spectrum check, {scenario} (f3dB = {f3:g} Hz, alpha = {al}), {n} frames, "
+          f"{len(per)} simulated records")
+    print("| band kHz | model P_d / P_d(ref) - 1 | E[I]/P_d(ref) - 1 | MC/E[I] - 1 (z) | "
+          "MC/model P_d - 1 (z) |")
+    print("|---|---|---|---|---|")
+    chi = np.zeros(2)
+    for b in bands:
+        cols = []
+        for i, ref in enumerate((ei, model)):
+            r = (per[:, b] / ref[b]).mean(axis=1)
+            m, e = r.mean() - 1, r.std(ddof=1) / math.sqrt(len(r))
+            chi[i] += (m / e) ** 2
+            cols.append(f"{m:+.4f} ({m / e:+.1f})")
+        print(f"| {f[b[0]] / 1e3:.1f}-{f[b[-1]] / 1e3:.1f} | "
+              f"{np.max(np.abs(model[b] / pd_ref[b] - 1)):.1e} | "
+              f"{np.mean(ei[b] / pd_ref[b] - 1):+.4f} | {cols[0]} | {cols[1]} |")
+    print(f"chi2 over the 16 bands: MC vs E[I] {chi[0]:.1f}, MC vs model P_d {chi[1]:.1f}")
+
+
 def se(p, n):
     return math.sqrt(max(p * (1 - p), 0.0) / n) if n else float("nan")
 
@@ -399,6 +529,14 @@ def main(argv=None):
                     help="per-scenario seed counts, e.g. hydrodynamics=10,control_photodiode=20")
     ap.add_argument("--drift-pulls", type=int, default=0,
                     help="only run the drift-parameter study on this many records")
+    ap.add_argument("--filter-gof-null", type=int, default=0,
+                    help="only fit standard+detector_filter to this many records simulated with "
+                    "that filter and report the refit's gof false-failure rate")
+    ap.add_argument("--filter-spectrum", type=int, default=0,
+                    help="only compare simulator and model with the exact expected periodogram "
+                    "of photodiode-filtered frames over this many simulated records")
+    ap.add_argument("--filter-scenario", default="detector_filter", choices=sorted(FILTERS),
+                    help="filter for --filter-gof-null / --filter-spectrum")
     ap.add_argument("--verbose", action="store_true")
     ap.add_argument("--summarize", nargs="+", default=None,
                     help="only print the summary of these diagnose_study.json files (merged)")
@@ -409,6 +547,16 @@ def main(argv=None):
             rows += json.loads(pathlib.Path(f).read_text())["rows"]
         uniq = {(r["scenario"], r["seed"]): r for r in rows}  # later files win
         print(summarize(list(uniq.values())))
+        return
+    if args.filter_gof_null or args.filter_spectrum:
+        bt.enable_x64()
+        bt.enable_compilation_cache()
+        if args.filter_spectrum:
+            filter_spectrum(args.filter_spectrum, args.filter_scenario)
+        if args.filter_gof_null:
+            seed0 = 90000 if args.filter_scenario == "detector_filter" else 91000
+            filter_gof_null(args.filter_gof_null, args.filter_scenario,
+                            seed0 + args.seed_offset)
         return
     if args.drift_pulls:
         bt.enable_x64()

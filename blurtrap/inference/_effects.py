@@ -212,7 +212,11 @@ class DetectorFilter(AbstractEffect):
     alpha = 0.4) was ranked first and significant in 5/5 records (refit adequate with k, gamma
     within 3 SE in 4/5; the fifth refit had gof p = 2.5e-4), a weak one (30 kHz, alpha = 0.6)
     in 4/5 (the fifth was named hydrodynamics with a plausible radius); 5 seeds each, so
-    these are rough rates. Its high-frequency deficit is also what an unphysically large hydrodynamic radius
+    these are rough rates. No model or simulator error was found behind that failed refit:
+    refitting this model to 300 records simulated with the true filter failed the gof at
+    diagnose's threshold 0.0083 in 1.0 +- 0.6 % (nominal ~1.1 %), and the model P_d matches an
+    independent reference to 2e-5 (benchmarks/RESULTS_diagnose.md, section 4). Its
+    high-frequency deficit is also what an unphysically large hydrodynamic radius
     produces; ``diagnose`` rejects that alternative by the Stokes-radius check."""
 
     name: ClassVar[str] = "detector_filter"
