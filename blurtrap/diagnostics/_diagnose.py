@@ -253,7 +253,8 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     notes = []
     base = calibrate(recs, method="likelihood", likelihood="whittle", model=mdl, k=k,
                      strict=False)
-    if not np.all(np.isfinite(base.errors)):
+    if not all(np.isfinite(e) for n, e in zip(base.param_names, base.errors)
+               if n not in base.at_bounds):
         notes.append("the base model's Fisher information is singular (a parameter is pinned "
                      "at its bound): its standard errors are undefined, a sign of misfit")
     fs = 1.0 / float(np.median([float(r.frame_interval) for r in recs]))

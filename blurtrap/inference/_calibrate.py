@@ -410,6 +410,9 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         c0 = np.mean([np.var(np.asarray(r.positions)) for r in recs])
         if values[names.index("tracking_var")] < 1e-6 * c0:
             at_bounds.append("tracking_var")
+    var = np.diag(cov)
+    if np.isfinite(var).any():  # held at its lower bound by the fit (_fit.AT_BOUND): NaN SE
+        at_bounds += [n for n, v in zip(names, var) if np.isnan(v) and n not in at_bounds]
     temps = {float(r.temperature) for r in recs}
     if "drift_diffusion" in names:
         notes = tuple(notes) + (

@@ -43,17 +43,32 @@ class FitOutput(eqx.Module):
     hessian_pd: jax.Array
 
 
+#: a parameter below this fraction of its start value is at its lower bound 0 (eps^2 -> 0)
+AT_BOUND = 1e-8
+
+
 def _finish_from(x, value, grad_x, h_x, scale, converged, n_steps, x_value=None):
     """Assemble a FitOutput from the value, gradient and Hessian in log parameters at ``x``:
     observed Fisher information in natural (scaled) parameters u = exp(x),
     d2f/du2 = (H_x - diag(grad_x))/(u u^T). The reported parameters are ``x_value`` (default
-    ``x``), e.g. ``x`` plus the final, tiny Newton step."""
+    ``x``), e.g. ``x`` plus the final, tiny Newton step.
+
+    Parameters run to their lower bound (``u < AT_BOUND``, e.g. eps^2 -> 0) are held there:
+    the others' covariance is the inverse of their own block of the information (errors
+    conditional on the bound, as usual for a boundary estimate) and the bound parameter's
+    variance is NaN. Its d2f/du2 would be (H - g)/u^2 with H and g both ~u: rounding noise, and
+    with it the whole covariance was NaN (measured: weak photodiode-filter refits)."""
     u_hat = jnp.exp(x)
+    free = u_hat >= AT_BOUND
+    both = free[:, None] & free[None, :]
     hess = (h_x - jnp.diag(grad_x)) / (u_hat[:, None] * u_hat[None, :])
     hess = 0.5 * (hess + hess.T)
+    eye = jnp.eye(x.shape[0], dtype=hess.dtype)
+    hess = jnp.where(both, hess, eye)  # bound parameters decoupled (identity rows)
     evals = jnp.linalg.eigvalsh(hess)
-    pd = jnp.all(evals > 0) & jnp.all(jnp.isfinite(evals))
+    pd = jnp.all(evals > 0) & jnp.all(jnp.isfinite(evals)) & jnp.any(free)
     cov = jnp.linalg.inv(hess) * scale[:, None] * scale[None, :]
+    cov = jnp.where(both, cov, jnp.where(eye > 0, jnp.nan, 0.0))
     cov = jnp.where(pd, cov, jnp.nan)
     return FitOutput(
         value=scale * jnp.exp(x if x_value is None else x_value),

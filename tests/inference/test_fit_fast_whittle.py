@@ -280,6 +280,23 @@ def test_newton_converges_at_a_boundary_optimum():
     assert math.exp(x_hat[3]) < 1e-10
 
 
+def test_covariance_holds_a_boundary_parameter_at_its_bound():
+    """The bound parameter gets a NaN variance; the others the inverse of their own block of
+    the information: here f = u_i - c_i log u_i (i < 3), so var(u_i) = c_i exactly, and no
+    correlation with the bound one. (Before: d2f/du2 of the bound parameter is (H - g)/u^2 =
+    0/u^2, the information was singular and every error NaN.)"""
+    tol = 1e-9
+    x, v, g, h, dx, k, done, _ = _fit._newton_iterate(_boundary_pass, None, None,
+                                                      jnp.full(4, 0.3), tol, tol, 200)
+    out = _fit._finish_from(x, v, g, h, jnp.ones(4), done, k, x_value=x - dx)
+    assert bool(out.hessian_pd) and bool(out.success)
+    cov = np.asarray(out.cov)
+    np.testing.assert_allclose(np.diag(cov)[:3], np.asarray(C), rtol=1e-6)
+    assert np.isnan(cov[3, 3])
+    off = cov[~np.eye(4, dtype=bool)]
+    assert np.all(np.abs(off) < 1e-9)
+
+
 def test_standard_fit_of_a_hydrodynamic_record_finds_the_trap():
     """Regression (benchmarks/study_diagnose.py, hydrodynamics seed 3504): a 200 kHz record of a
     1.5 um bead with frequency-dependent friction, fitted with the standard model: eps^2 runs to
@@ -298,6 +315,7 @@ def test_standard_fit_of_a_hydrodynamic_record_finds_the_trap():
     fit = bt.calibrate(rec, method="likelihood", likelihood="whittle")
     assert abs(fit.k / k - 1) < 0.2, fit.summary()
     assert "tracking_var" in fit.at_bounds
+    assert np.isfinite(fit.k_err) and np.isfinite(fit.gamma_err)  # conditional on eps^2 = 0
 
 
 # ------------------------------------------------------------------------------------------
