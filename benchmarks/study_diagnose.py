@@ -129,6 +129,17 @@ def anharmonic(seed, beta):
     return bt.Recording(x, frame_interval=DT, exposure=DT)
 
 
+def jittered(seed, std_frac=0.05, w_frac=0.8):
+    """Frames taken at jittered times (TimingJitter inside the scan) with their time stamps."""
+    from blurtrap.simulate import TimingJitter
+
+    x, t = bt.simulate(K, GAMMA, w_frac * DT, DT, N, key=jax.random.key(seed),
+                       method="exact_frames", tracking_std=EPS,
+                       injections=(TimingJitter(std_frac * DT),), return_times=True)
+    return bt.Recording(np.asarray(x)[0], frame_interval=DT, exposure=w_frac * DT,
+                        times=np.asarray(t).ravel(), allow_irregular=True)
+
+
 K_SERIES = 5e-5
 
 
@@ -198,6 +209,13 @@ SCENARIOS = {
                         "single", "4 exposures, triangular profile (rise = W/2)"),
     "exposure_kernel_weak": ("exposure_kernel", lambda s: exposure_series(s, rise=0.25), None,
                              "single", "4 exposures, trapezoid rise = W/4"),
+    # appended last so that the other scenarios keep their seeds
+    "control_power": (None, lambda s: power_offset_recs(s, p0=0.0), None, "power_offset",
+                      "4 powers 0.1-0.4 W, k = c P, nothing hidden"),
+    "timing_jitter": ("timing_jitter", lambda s: jittered(s), None, "timestamps",
+                      "jitter std 5 % of dt, W = 0.8 dt, time stamps kept"),
+    "timing_jitter_weak": ("timing_jitter", lambda s: jittered(s, 2e-4), None, "timestamps",
+                           "jitter std 0.02 % of dt (tolerance: max deviation 0.1 % of dt)"),
 }
 SEED_BASE = {name: (1000 if name == "control" else 2000 + 100 * i)
              for i, name in enumerate(SCENARIOS)}
@@ -214,7 +232,7 @@ TRUTH = {"power_offset": 0.05, "power_offset_weak": 0.01, "laser_heating": 25.0,
 
 def fixed_ok(name, kind, fit):
     """(gof, truth) checks of the full refit with the first-ranked effect."""
-    if kind == "histogram":  # not part of the Gaussian likelihood: nothing to refit
+    if kind in ("histogram", "timestamps"):  # not part of the likelihood: nothing to refit
         return True
     if fit is None:
         return None
@@ -252,14 +270,14 @@ def run_one(name, seed):
         "significant": [c.effect for c in d.ranking if c.significant],
         "base_within": (within(d.fit, k=TRUTH_KG.get(name, (K, GAMMA))[0],
                                gamma=TRUTH_KG.get(name, (K, GAMMA))[1])
-                        if kind in ("single", "histogram") else None),
+                        if kind in ("single", "histogram", "timestamps") else None),
         "implausible": [c.effect for c in d.ranking if not getattr(c, "plausible", True)],
         "notes": list(d.notes),
     }
     if effect is not None:
         row["identified"] = bool(top is not None and top.effect == effect and top.significant)
         row["fixed_gof_p"] = None if fit is None else float(fit.gof["p_value"])
-        row["fixed_gof_ok"] = (True if kind == "histogram" else
+        row["fixed_gof_ok"] = (True if kind in ("histogram", "timestamps") else
                                None if fit is None else bool(fit.gof["p_value"] > d.threshold))
         row["fixed_truth_ok"] = fixed_ok(name, kind, fit) if row["identified"] else None
         row["fixed_ok"] = bool(row["identified"] and row["fixed_gof_ok"] and row["fixed_truth_ok"])
@@ -591,7 +609,7 @@ def main(argv=None):
             n = per[name]
         elif name == "control":
             n = args.seeds
-        elif SCENARIOS[name][3] not in ("single", "histogram"):
+        elif SCENARIOS[name][3] not in ("single", "histogram", "timestamps"):
             n = power if not name.endswith("_weak") else min(power, weak)
         else:
             n = weak if name.endswith("_weak") else args.effect_seeds
