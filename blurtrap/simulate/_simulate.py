@@ -586,6 +586,12 @@ def simulate(
         dbuf = jnp.zeros((G, n_traces, n_buf), dtype) if jitter and n_chunks > 1 else None
         if mesh is not None:
             x = jax.device_put(x, NamedSharding(mesh, PartitionSpec(None, "traces")))
+            if n_chunks > 1:  # the output buffer is split over the devices like the traces
+                spec = PartitionSpec(*((None,) * len(lead) + ("traces", None)))
+                buf = jax.device_put(buf, NamedSharding(mesh, spec))
+                if jitter:
+                    dbuf = jax.device_put(dbuf,
+                                          NamedSharding(mesh, PartitionSpec(None, "traces")))
         t0 = time.perf_counter()
         for c in range(n_chunks):
             x, delta, out, dout = run_chunk_jit(
