@@ -228,7 +228,7 @@ def jitter_normals(keys, frame, n_traj, dtype):
 def _drift(cfg, x, P, force_params):
     if cfg.force is None:
         return -x
-    sig = P["sigma"][:, None]
+    sig = P["scale"][:, None]
     f_si = cfg.force(x * sig, force_params)
     return (f_si / (P["k"][:, None] * sig)).astype(x.dtype)
 

@@ -519,7 +519,7 @@ def simulate(
                 hmax = h.max(axis=1)
                 n_dead = max(1, math.ceil(float(np.max(rdead / hmax)) - 1e-9)) if rdead.max() > 0 else 1
                 bias = co.euler_bias(hmax)[:, None] + co.trapezoid_bias(a_win, cum[None, :])
-                P["sigma"], P["k"] = sigma, kf
+                P["k"] = kf  # (sigma is P["scale"], set below)
             worst = float(np.max(bias))
             if worst > bias_tol:
                 i = np.unravel_index(np.argmax(bias), bias.shape)
