@@ -20,6 +20,26 @@ $$\mathrm{var}(x_L|x_0) = 1-e^{-2L},\qquad
 The unconditional check: ``var(m) = phi1^2 + (S - phi1^2) = S(L)`` as it must.
 ``g(L) = S - phi1^2`` cancels for small L, so it is summed as the series
 ``g = sum_{n>=1} (-1)^n (4 - 2^{n+2}) L^n / (n+2)!`` (``= 2L/3 - L^2/2 + ...``) below 0.5.
+
+Innovations form of the frames (one exposure window, regular frames)
+--------------------------------------------------------------------
+With ``a = W/tau`` and ``c = e^{-r}`` (``r = dt/tau``) the frames have ``C(0) = S(a)`` and
+``C(n) = c^n q(a)`` for ``n >= 1``, ``q = (sinh(a/2)/(a/2))^2`` (integrate
+``e^{-|t-s|}`` over two exposures ``n dt`` apart). So ``Y_m = X_m - c X_{m-1}`` is MA(1):
+
+$$\gamma_Y(0) = (1-c^2)\,S - 2c^2 D,\qquad \gamma_Y(1) = c\,D,\qquad
+  D = q - S = \frac{2(\sinh a - a)}{a^2} = \frac{a}{3} + \frac{a^3}{60} + \dots$$
+
+(no cancellation: ``2 c^2 D <= (1 - c^2) S / 2``). Its invertible MA(1) form
+``Y_m = e_m + b e_{m-1}``, ``e_m ~ N(0, s^2)``, has ``b = 2 rho/(1 + sqrt(1 - 4 rho^2))``
+(``rho = gamma_Y(1)/gamma_Y(0)``, ``|rho| < 1/2`` as the spectrum is positive) and
+``s^2 = gamma_Y(0)/(1 + b^2)``. The frames are then exactly the stationary ARMA(1,1)
+
+$$X_m = \hat x_m + e_m,\qquad \hat x_{m+1} = c\,\hat x_m + (c + b)\,e_m,\qquad
+  \hat x_1 \sim N\big(0,\ v\big),\ v = \frac{(c+b)^2 s^2}{1-c^2},$$
+
+``x_hat_m = E[X_m | X_{m-1}, X_{m-2}, ...]`` the one-step predictor (``v = S - s^2``): one
+normal per frame instead of the two of the segment law.
 """
 
 from __future__ import annotations
@@ -85,6 +105,28 @@ def segment_law(length):
     c_x = np.where(g > 0, cxm / safe, 0.0)
     s_x = np.sqrt(np.maximum(vx - c_x * c_x, 0.0))
     return e, p, s_m, c_x, s_x
+
+
+_D_C = np.array([2.0 / math.factorial(2 * k + 3) for k in range(_NT)])  # D/a in powers of a^2
+
+
+def innovations_law(a, r):
+    """Coefficients ``(c, c + b, s, sqrt(v))`` of the frames' innovations form (module
+    docstring) for exposure ``a = W/tau`` and frame interval ``r = dt/tau >= a`` (float64)."""
+    a = np.asarray(a, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    c = np.exp(-r)
+    one_c2 = -np.expm1(-2.0 * r)
+    al = np.where(a < _CUT, 1.0, a)
+    # c D, without overflow of sinh for long exposures (r >= a)
+    cd_closed = (np.exp(al - r) - np.exp(-al - r) - 2.0 * al * c) / (al * al)
+    cd = np.where(a < _CUT, c * a * _series(a * a, _D_C), cd_closed)
+    g0 = one_c2 * s_blur(a) - 2.0 * c * cd
+    rho = cd / g0
+    b = 2.0 * rho / (1.0 + np.sqrt(np.maximum(1.0 - 4.0 * rho * rho, 0.0)))
+    s2 = g0 / (1.0 + b * b)
+    v = (c + b) ** 2 * s2 / one_c2
+    return c, c + b, np.sqrt(s2), np.sqrt(v)
 
 
 def ou_step(h):

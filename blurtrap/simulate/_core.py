@@ -3,7 +3,9 @@
 One call runs ``n`` frames for all grid points ``G`` and trajectories ``T`` at once:
 ``lax.scan`` over frames; inside a frame one block of standard normals (``n_rows`` rows of
 ``(G, T)``) is used, and an inner ``lax.scan`` over the substeps accumulates the exposure
-averages (``method="exact_frames"`` draws the frame from its exact law instead).
+averages (``method="exact_frames"`` draws the frame from its exact law instead: the joint law
+of the exposure segments given the start, or, with one window and regular frames, the frames'
+innovations form, one normal per frame, two frames per step of the scan).
 Memory is O(G T n_rows) per frame plus the frame output, never O(substeps). A chunk's output
 is built in the user's ``(..., T, frames)`` layout and filled in place: the scan's
 ``(frames, ..., T)`` output is transposed block by block (:func:`block_frames` frames at a
@@ -67,10 +69,16 @@ class CoreConfig(NamedTuple):
     mesh: Any  # jax.sharding.Mesh or None
     unroll: int
     normal_dtype: str
+    # exact_frames with one window and regular frames: the frames' innovations form
+    # (``_coeffs.innovations_law``), one normal per frame; frames run in pairs, one Box-Muller
+    # pair per two frames (counter: the pair's first frame), so chunks have even lengths
+    innovations: bool = False
 
     @property
     def n_rows(self) -> int:
         """Normals drawn per frame and trajectory."""
+        if self.innovations:
+            return 1
         if self.method == "exact_frames":
             return 2 * self.n_seg  # the dead time is merged into the last segment's draw
         return self.n_exp + self.n_dead
@@ -336,6 +344,20 @@ def _frame(cfg, P, force_params, keys_j, rt, x, delta, frame):
     return x, d_next, out
 
 
+def _innovation_pair(cfg, P, rt, xh):
+    """Frames ``2j, 2j + 1`` of the innovations form from the predictor `xh` (units of sigma)
+    and one Box-Muller pair: returns the next predictor and the frames (2, G, 1, T)."""
+    dtype = jnp.dtype(cfg.dtype)
+    c, cb, s = (P[name][:, None] for name in ("ic", "icb", "is"))
+    out = []
+    for z in pair_normals(rt[0][0], rt[1][0]):
+        e = s * z.astype(dtype)
+        out.append(xh + e)
+        xh = c * xh + cb * e
+    xh = _constrain(cfg, xh, (None, "traces"))
+    return xh, jnp.stack(out)[:, :, None, :]
+
+
 def _draws(cfg, kd, f, n_t, t_offset, n_total):
     """Frame `f`'s Box-Muller pairs ``(r, t)`` for trajectories ``[t_offset, t_offset + n_t)``."""
     r, t = pair_uniforms(kd, f, -(-cfg.n_rows // 2), n_t, cfg.normal_dtype, t_offset, n_total)
@@ -352,6 +374,18 @@ def _scan_frames(cfg, n, P, force_params, kd, keys_j, x, delta, rt, frame0, t_of
 
     def draws(f):
         return _draws(cfg, kd, f, n_t, t_offset, n_total)
+
+    if cfg.innovations:  # two frames per step; n is even
+
+        def pair(carry, f):
+            x, delta, rt = carry
+            nxt = draws(f + 2)
+            x, acc = _innovation_pair(cfg, P, rt, x)
+            return (x, delta, nxt), acc
+
+        frames = frame0 + 2 * jnp.arange(n // 2, dtype=jnp.int32)
+        (x, delta, rt), acc = jax.lax.scan(pair, (x, delta, rt), frames)
+        return x, delta, rt, acc.reshape((n,) + acc.shape[2:]), None
 
     def body(carry, f):
         x, delta, rt = carry
@@ -449,6 +483,8 @@ def run_chunk(cfg: CoreConfig, n: int, lead: tuple, P, force_params, keys_f, key
     """
     n_t = x.shape[-1]
     n_pairs = -(-cfg.n_rows // 2)
+    if cfg.innovations and n % 2:
+        raise ValueError(f"chunks of the innovations form have even lengths; got n = {n}")
     tile = tile_size(cfg, n_t)
     n_pad = 0 if tile is None else -n_t % tile
     if n_pairs * (n_t + n_pad) * 2 >= 2**32:

@@ -264,7 +264,13 @@ def simulate(
 
       followed by an exact OU step over the dead time ``dt - W``. Several windows are drawn
       segment by segment (between consecutive window ends) with the same law. Exact at any
-      ``dt``, ``W``; cost O(1) per frame. With a :class:`PhotodiodeFilter` injection the
+      ``dt``, ``W``; cost O(1) per frame. With one window and regular frames (no
+      :class:`TimingJitter`) the same law is drawn with one normal per frame instead of two,
+      from the frames' exact ARMA(1,1) innovations form: with ``c = exp(-dt/tau)``,
+      ``X_m = xh_m + e_m``, ``xh_{m+1} = c xh_m + (c + b) e_m``, ``e_m ~ N(0, s^2)``, and
+      ``xh_1`` drawn from its stationary law; ``b`` and ``s^2`` follow from ``C(0)`` and
+      ``C(1)`` (``blurtrap.simulate._coeffs``, derivation there). Chunks then have even
+      lengths (`chunk_frames` is rounded up). With a :class:`PhotodiodeFilter` injection the
       position and the detector's filter state are advanced together as one exact linear
       Gaussian system (``blurtrap.simulate._linear``).
     - ``"spectral"``: stationary Gaussian frames drawn from their exact discrete PSD (folded
@@ -461,7 +467,12 @@ def simulate(
 
     if not special:
         P = {"rdead": rdead}
-        if method == "exact_frames":
+        innovations = method == "exact_frames" and not windows and not jitter
+        if innovations:  # one normal per frame (see _coeffs.innovations_law)
+            P["ic"], P["icb"], P["is"], P["ix"] = co.innovations_law(
+                L[:, 0], np.maximum(dtf / tau, L[:, 0]))
+            n_exp, n_dead = 0, 1
+        elif method == "exact_frames":
             e, p, sm, cx, sx = co.segment_law(L)
             P.update(e=e, p=p, sm=sm, cx=cx, sx=sx)
             # window j (sorted) = sum_{s <= j} L_s m_s / a_j
@@ -558,6 +569,7 @@ def simulate(
             mesh=mesh,
             unroll=unroll,
             normal_dtype=(dtype if normal_dtype is None else _resolve_dtype(normal_dtype)).name,
+            innovations=innovations,
         )
         total = burn_in_frames + n_frames
         if chunk_frames is None:
@@ -569,6 +581,7 @@ def simulate(
             chunk = max(1, min(total, budget // max(per_frame, 1)))
         else:
             chunk = min(_count("chunk_frames", chunk_frames), total)
+        chunk += chunk % 2 if innovations else 0  # frames run in pairs
         n_chunks = -(-total // chunk)
         # each chunk comes out in the user's shape (reshapes inside the jitted chunk are free,
         # eager ones copy); several chunks are placed into one donated buffer; a partial last
@@ -578,6 +591,8 @@ def simulate(
         lead = tuple(shape) + ((n_win,) if windows else ())
         k_init, k_frames, k_jit, k_inj, x, buf = _start(
             keys, n_traces, dtype.name, lead + (t_buf, n_buf) if n_chunks > 1 else None)
+        if innovations:  # the start is the stationary one-step predictor
+            x = x * P["ix"][:, None]
         if jitter:
             delta = P["jstd"][:, None] * jitter_normals(k_jit, 0, n_traces, dtype)
         else:

@@ -56,6 +56,39 @@ def test_segment_law_against_quadrature(L):
     np.testing.assert_allclose(p**2 + s_m**2, co.s_blur(L), rtol=1e-12)
 
 
+@pytest.mark.parametrize("a, r", [(1e-4, 1e-3), (0.3, 0.3), (0.49, 2.0), (0.51, 0.51),
+                                  (2.0, 5.0), (20.0, 20.0), (800.0, 900.0)])
+def test_innovations_law_against_quadrature(a, r):
+    """The innovations form (one normal per frame) reproduces the frames' autocovariance
+    C(n) = (1/a^2) int int e^{-|n r + t - s|} ds dt (units sigma, tau) at lags 0, 1, 2,
+    written as the one-dimensional (1/a^2) int_{-a}^{a} (a - |u|) e^{-|n r + u|} du."""
+    import mpmath as mp
+
+    mp.mp.dps = 30
+    am, rm = mp.mpf(a), mp.mpf(r)
+
+    def cov(n):
+        if a > 100:  # beyond float64's sinh; the closed forms S(a) and e^{-n r} q(a)
+            if n == 0:
+                return 2 / am * (1 - (1 - mp.exp(-am)) / am)
+            return mp.exp(-n * rm) * (mp.sinh(am / 2) / (am / 2)) ** 2
+        f = lambda u: (am - abs(u)) * mp.exp(-abs(n * rm + u))  # noqa: E731
+        # kink at u = 0; e^{-u} varies on the scale 1
+        return mp.quad(f, mp.linspace(-am, am, max(41, int(4 * a) + 1))) / am**2
+
+    c, cb, s, sv = co.innovations_law(np.array(a), np.array(r))
+    b = cb - c
+    assert abs(b) < 1 and abs(c - np.exp(-r)) <= 1e-15
+    # X_m = xh_m + e_m, xh_{m+1} = c xh_m + (c + b) e_m, var(xh) = v, var(e) = s^2
+    g0 = sv**2 + s**2
+    g1 = c * sv**2 + cb * s**2
+    np.testing.assert_allclose(g0, float(cov(0)), rtol=1e-12)
+    np.testing.assert_allclose(g1, float(cov(1)), rtol=1e-10)
+    np.testing.assert_allclose(c * g1, float(cov(2)), rtol=1e-10)
+    # v is the stationary variance of the predictor
+    np.testing.assert_allclose(sv**2, c * c * sv**2 + cb**2 * s**2, rtol=1e-12)
+
+
 def test_cond_avg_var_series_small_L():
     import mpmath as mp
 

@@ -11,10 +11,11 @@ K, TAU = 5e-5, 0.537e-3
 CASES = [
     ("exact", dict(substeps=9, exposure=0.5 * TAU)),
     ("exact_frames", dict(exposure=ExposureWindows([0.2 * TAU, 0.5 * TAU]))),
+    ("exact_frames", dict(exposure=0.5 * TAU)),  # the innovations form
 ]
 
 
-@pytest.mark.parametrize("method, kw", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("method, kw", CASES, ids=["exact", "exact_frames", "innovations"])
 def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
     tiles = []  # the tile sizes run_chunk was traced with
     tile_size, run_chunk = _core.tile_size, _core.run_chunk
@@ -43,9 +44,10 @@ def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
     # both runs were traced, one without and one with tiles
     assert untiled_tiles == {None} and tiled_tiles == {256}, (untiled_tiles, tiled_tiles)
     # the scan really ran in tiles (exact: 10 rows per frame, exact_frames: 4)
-    rows = {"exact": (9, 1, 1), "exact_frames": (0, 1, 2)}[method]
+    innovations = not isinstance(kw["exposure"], ExposureWindows)
+    rows = {"exact": (9, 1, 1), "exact_frames": (0, 1, 1 if innovations else 2)}[method]
     cfg = _core.CoreConfig(method, rows[0], rows[1], rows[2], rows[2], False, None, "float64",
-                           None, 1, "float64")
+                           None, 1, "float64", innovations)
     assert tile_size(cfg, 700) == 256
     np.testing.assert_array_equal(tiled, untiled)
     assert np.all(np.isfinite(tiled)) and np.std(tiled) > 0

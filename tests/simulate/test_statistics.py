@@ -124,6 +124,31 @@ def test_exact_frames_agrees_with_exact_substeps():
     assert scipy.stats.ks_2samp(a[:, ::50].ravel(), b[:, ::50].ravel()).pvalue > 1e-3
 
 
+def test_exact_frames_innovations_form_agrees_with_segment_law():
+    """One exposure window draws the frames from their innovations form (one normal per frame);
+    a one-element ExposureWindows uses the segment law (two normals per frame). Same law,
+    from the first frame on: frame-0 variance and frame-0/1 covariance over many traces
+    against C(0), C(1), and variance / lag-1 covariance of the two samplers against each
+    other."""
+    _, _, k, tau = SETTINGS[1]
+    gamma, w, dt = k * tau, 0.7 * tau, 1.3 * tau
+    kw = dict(n_traces=4096, method="exact_frames", temperature=T)
+    inn = np.asarray(simulate(k, gamma, w, dt, 64, key=jax.random.key(21), **kw))
+    seg = np.asarray(simulate(k, gamma, ExposureWindows([w]), dt, 64, key=jax.random.key(22),
+                              **kw))[0]
+    c0 = float(frame_autocovariance(0, k, gamma, w, dt))
+    c1 = float(frame_autocovariance(1, k, gamma, w, dt))
+    n = inn.shape[0]
+    # the first frame: var of x^2 is 2 C0^2; of x0 x1 it is C0^2 + C1^2 (Gaussian)
+    assert abs(np.mean(inn[:, 0] ** 2) - c0) < Z * np.sqrt(2 / n) * c0
+    assert abs(np.mean(inn[:, 0] * inn[:, 1]) - c1) < Z * np.sqrt((c0**2 + c1**2) / n)
+    for stat in (lambda x: np.mean(x * x, 1), lambda x: np.mean(x[:, 1:] * x[:, :-1], 1)):
+        sa, sb = stat(inn), stat(seg)
+        se = np.sqrt(sa.var(ddof=1) / sa.size + sb.var(ddof=1) / sb.size)
+        assert abs(sa.mean() - sb.mean()) < Z * se
+    assert scipy.stats.ks_2samp(inn[:, ::16].ravel(), seg[:, ::16].ravel()).pvalue > 1e-3
+
+
 def test_euler_converges_to_exact():
     """Euler's variance bias ~ h/(2 tau) shrinks with h (measured), towards exact_frames."""
     _, _, k, tau = SETTINGS[0]
