@@ -437,11 +437,12 @@ def _run_tile(cfg, n, P, force_params, kd, keys_j, x, delta, frame0, t_offset, n
         return (x, delta, rt, buf, dbuf), None
 
     carry = (x, delta, _draws(cfg, kd, frame0, n_t, t_offset, n_total), buf, dbuf)
-    if n_full:
-        starts = frame0 + nbl * jnp.arange(n_full, dtype=jnp.int32)
-        carry, _ = lax.scan(lambda c, f: block(c, f, nbl), carry, starts)
+    # the partial block first: written after the loop, it made XLA copy the whole buffer
     if rem:
-        carry, _ = block(carry, frame0 + n_full * nbl, rem)
+        carry, _ = block(carry, frame0, rem)
+    if n_full:
+        starts = frame0 + rem + nbl * jnp.arange(n_full, dtype=jnp.int32)
+        carry, _ = lax.scan(lambda c, f: block(c, f, nbl), carry, starts)
     x, delta, _, buf, dbuf = carry
     return x, delta, buf, dbuf
 
