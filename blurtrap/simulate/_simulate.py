@@ -576,7 +576,7 @@ def simulate(
             # substeps: ~4 M substep-trajectories of random numbers per chunk. exact_frames
             # needs O(G T) working memory whatever the chunk, so its chunks are only there to
             # bound one call's output (32 M frame-trajectories) and to feed the progress bar
-            per_frame = G * n_traces * cfg.n_rows
+            per_frame = G * n_traces * max(cfg.n_rows, 2)  # innovations: the same 32 M
             budget = 1 << (26 if method == "exact_frames" and not progress else 22)
             chunk = max(1, min(total, budget // max(per_frame, 1)))
         else:
