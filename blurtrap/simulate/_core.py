@@ -35,7 +35,10 @@ float64 ziggurat costs ~10 ns. Two XLA CPU behaviours shape the code: a value us
 fusions is recomputed in each (so a Box-Muller pair's bits would be hashed twice), and gathering
 the cos and sin halves into one array makes a slow scalar loop. Hence each frame's
 ``(r, theta)`` are computed one frame ahead and carried through the frame scan (loop state is
-always materialised, exactly once), and the substep scan consumes rows in pairs.
+always materialised, exactly once), and the substep scan consumes rows in pairs. In float32
+one Threefry block gives both ``r`` and ``theta``; carried as two arrays, each would be computed
+by its own fusion, hashing twice, so they are carried as one complex64 array ``r + i t``
+(12 % faster, same numbers).
 
 CPU performance
 ---------------
@@ -275,7 +278,7 @@ def _frame(cfg, P, force_params, keys_j, rt, x, delta, frame):
     """Frame `frame` from the start state `x` with its Box-Muller pairs ``rt = (r, t)``."""
     dtype = jnp.dtype(cfg.dtype)
     n_t = x.shape[-1]
-    r, t = rt
+    r, t = _unpack(rt)
 
     def row(i):
         z = pair_normals(r[i // 2], t[i // 2])[i % 2]
@@ -350,7 +353,8 @@ def _innovation_pair(cfg, P, rt, xh):
     dtype = jnp.dtype(cfg.dtype)
     c, cb, s = (P[name][:, None] for name in ("ic", "icb", "is"))
     out = []
-    for z in pair_normals(rt[0][0], rt[1][0]):
+    r, t = _unpack(rt)
+    for z in pair_normals(r[0], t[0]):
         e = s * z.astype(dtype)
         out.append(xh + e)
         xh = c * xh + cb * e
@@ -362,7 +366,16 @@ def _draws(cfg, kd, f, n_t, t_offset, n_total):
     """Frame `f`'s Box-Muller pairs ``(r, t)`` for trajectories ``[t_offset, t_offset + n_t)``."""
     r, t = pair_uniforms(kd, f, -(-cfg.n_rows // 2), n_t, cfg.normal_dtype, t_offset, n_total)
     spec = (None, None, "traces")
+    if jnp.dtype(cfg.normal_dtype) == jnp.float32:  # one Threefry block gives r and t
+        return (_constrain(cfg, lax.complex(r, t), spec),)
     return _constrain(cfg, r, spec), _constrain(cfg, t, spec)
+
+
+def _unpack(rt):
+    """``(r, t)`` from :func:`_draws`' output (float32 pairs come packed as ``r + i t``)."""
+    if len(rt) == 1:
+        return jnp.real(rt[0]), jnp.imag(rt[0])
+    return rt
 
 
 def _scan_frames(cfg, n, P, force_params, kd, keys_j, x, delta, rt, frame0, t_offset,
