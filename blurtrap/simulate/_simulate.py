@@ -160,6 +160,25 @@ def _progress(done, total, t0, stream):
     stream.flush()
 
 
+_CHUNK_STEPS = 16
+
+
+def _balanced_chunk(total: int, max_chunk: int) -> int:
+    """Frames per chunk for a run of `total` frames with chunks of at most `max_chunk`.
+
+    The chunks are compiled once per size and a partial last chunk is computed in full, so:
+    one chunk when the run fits; otherwise the fewest chunks, each rounded up to a multiple of
+    ``max_chunk / 16`` (at most 16 compiled sizes per grid and trace count), which bounds the
+    frames computed beyond the run by about 1/16 of it (a fixed ``max_chunk`` could waste up to
+    half: ``total = max_chunk + 1`` ran two full chunks)."""
+    if total <= max_chunk:
+        return total
+    n_chunks = -(-total // max_chunk)
+    step = max(1, max_chunk // _CHUNK_STEPS)
+    even = -(-total // n_chunks)
+    return min(max_chunk, -(-even // step) * step)
+
+
 @functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _start(keys, n_traces, dtype, buf_shape):
     """Per grid point: the keys of the initial state, the frames, the jitter and the injections,
@@ -578,14 +597,14 @@ def simulate(
             # bound one call's output (32 M frame-trajectories) and to feed the progress bar
             per_frame = G * n_traces * max(cfg.n_rows, 2)  # innovations: the same 32 M
             budget = 1 << (26 if method == "exact_frames" and not progress else 22)
-            chunk = max(1, min(total, budget // max(per_frame, 1)))
+            chunk = _balanced_chunk(total, max(1, budget // max(per_frame, 1)))
         else:
             chunk = min(_count("chunk_frames", chunk_frames), total)
         chunk += chunk % 2 if innovations else 0  # frames run in pairs
         n_chunks = -(-total // chunk)
         # each chunk comes out in the user's shape (reshapes inside the jitted chunk are free,
         # eager ones copy); several chunks are placed into one donated buffer; a partial last
-        # chunk is computed in full
+        # chunk is computed in full (the default chunk keeps that waste small)
         n_buf = n_chunks * chunk
         t_buf = buffer_traces(cfg, n_traces)
         lead = tuple(shape) + ((n_win,) if windows else ())

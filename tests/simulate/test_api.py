@@ -158,6 +158,20 @@ def test_chunking_and_burn_in_do_not_change_results(method):
     np.testing.assert_allclose(full, longer[:, 5:], rtol=1e-13)
 
 
+def test_default_chunks_are_few_and_waste_little():
+    """Default chunking: the fewest chunks of at most max_chunk frames, and the frames computed
+    beyond the run (a partial last chunk runs in full) are fewer than one max_chunk/16 step
+    per chunk (a fixed max_chunk wasted up to a whole chunk)."""
+    from blurtrap.simulate._simulate import _balanced_chunk
+
+    for max_chunk in (1, 2, 3, 16, 17, 100, 41527):
+        for total in [*range(1, 200), 41528, 65536, 10**6 + 3]:
+            c = _balanced_chunk(total, max_chunk)
+            n = -(-total // c)
+            assert c <= max(max_chunk, 1) and n == -(-total // max_chunk), (total, max_chunk, c)
+            assert 0 <= n * c - total < n * max(1, max_chunk // 16), (total, max_chunk, c)
+
+
 def test_progress_bar_per_chunk(capsys):
     _sim(30, chunk_frames=10, progress=True)
     err = capsys.readouterr().err
