@@ -300,27 +300,29 @@ def _frame(cfg, P, force_params, keys_j, rt, x, delta, frame):
             z1, z2 = row(2 * s), row(2 * s + 1)
             m = P["p"][:, s, None] * x + P["sm"][:, s, None] * z1
             acc = acc + P["M"][:, s, :, None] * m[:, None, :]
-            e, cx, sx = P["e"][:, s, None], P["cx"][:, s, None], P["sx"][:, s, None]
+            # increments (e - 1 = em1): see _coeffs, "Decay by increments"
+            em1, cx, sx = P["em1"][:, s, None], P["cx"][:, s, None], P["sx"][:, s, None]
             if s < last:
-                x = e * x + cx * z1 + sx * z2
+                x = x + (em1 * x + cx * z1 + sx * z2)
             else:
                 # end of exposure then the dead step, in one draw: with e_d = exp(-d),
                 # x' = e_d (e x + cx z1 + sx z2) + sqrt(1 - e_d^2) z3
                 #    = e_d e x + e_d cx z1 + sqrt(e_d^2 sx^2 + 1 - e_d^2) z2'
+                # and e_d e - 1 = e_d em1 + expm1(-d)
                 ed = jnp.exp(-d)
                 sd = jnp.sqrt(ed * ed * sx * sx - jnp.expm1(-2.0 * d))
-                x = ed * (e * x + cx * z1) + sd * z2
+                x = x + ((ed * em1 + jnp.expm1(-d)) * x + ed * cx * z1 + sd * z2)
     else:
         acc = P["Wt"][:, 0, :, None] * x[:, None, :]
         n_exp = cfg.n_exp
         coefs = (P["A"][..., None], P["B"][..., None], P["Wt"][:, 1:, :, None])
         if cfg.method == "exact":
 
-            def sub(xx, ac, zi, a, b, w):
-                xx = a * xx + b * zi
+            def sub(xx, ac, zi, a, b, w):  # a = exp(-h) - 1: by increments
+                xx = xx + (a * xx + b * zi)
                 return xx, ac + w * xx[:, None, :]
 
-            fills = (1.0, 0.0, 0.0)
+            fills = (0.0, 0.0, 0.0)
         else:
 
             def sub(xx, ac, zi, a, b, w):
@@ -341,7 +343,7 @@ def _frame(cfg, P, force_params, keys_j, rt, x, delta, frame):
             x, _ = _scan_substeps(cfg, r, t, n_exp, n_exp + nd, x, jnp.zeros((), dtype),
                                   (ones,), (0.0,), dead)
         else:
-            x = jnp.exp(-d) * x + jnp.sqrt(-jnp.expm1(-2.0 * d)) * row(n_exp)
+            x = x + (jnp.expm1(-d) * x + jnp.sqrt(-jnp.expm1(-2.0 * d)) * row(n_exp))
     x = _constrain(cfg, x, (None, "traces"))
     out = (acc, delta) if cfg.jitter else (acc, None)
     return x, d_next, out
@@ -351,13 +353,13 @@ def _innovation_pair(cfg, P, rt, xh):
     """Frames ``2j, 2j + 1`` of the innovations form from the predictor `xh` (units of sigma)
     and one Box-Muller pair: returns the next predictor and the frames (2, G, 1, T)."""
     dtype = jnp.dtype(cfg.dtype)
-    c, cb, s = (P[name][:, None] for name in ("ic", "icb", "is"))
+    cm1, cb, s = (P[name][:, None] for name in ("icm1", "icb", "is"))
     out = []
     r, t = _unpack(rt)
     for z in pair_normals(r[0], t[0]):
         e = s * z.astype(dtype)
         out.append(xh + e)
-        xh = c * xh + cb * e
+        xh = xh + (cm1 * xh + cb * e)  # c - 1 = cm1: by increments
     xh = _constrain(cfg, xh, (None, "traces"))
     return xh, jnp.stack(out)[:, :, None, :]
 
@@ -381,8 +383,9 @@ def _unpack(rt):
 def _scan_frames(cfg, n, P, force_params, kd, keys_j, x, delta, rt, frame0, t_offset,
                  n_total):
     """The frame scan over frames ``frame0 .. frame0 + n`` for trajectories
-    ``[t_offset, t_offset + T)`` of ``n_total``; `rt` are frame `frame0`'s Box-Muller pairs and
-    the next frame's are returned. Returns ``(x, delta, rt, frames (n, G, n_win, T), deltas)``."""
+    ``[t_offset, t_offset + T)`` of ``n_total``; `rt` are frame `frame0`'s Box-Muller pairs
+    (innovations form: frames ``frame0`` and ``frame0 + 1``'s pair) and frame
+    ``frame0 + n``'s are returned. Returns ``(x, delta, rt, frames (n, G, n_win, T), deltas)``."""
     n_t = x.shape[-1]
 
     def draws(f):

@@ -259,7 +259,8 @@ def simulate(
     ``alpha = W/tau``, ``rho = exp(-dt/tau)``.
 
     Internally everything runs in units of ``sigma`` and ``tau`` (coefficients computed in
-    float64 on the host), so ``dtype=float32`` keeps float32-relative accuracy.
+    float64 on the host) and the scans decay by increments, ``x' = x + (e^{-h} - 1) x + ...``,
+    so ``dtype=float32`` keeps float32-relative accuracy even for steps ``h << tau``.
 
     **Methods:**
 
@@ -283,12 +284,13 @@ def simulate(
 
       followed by an exact OU step over the dead time ``dt - W``. Several windows are drawn
       segment by segment (between consecutive window ends) with the same law. Exact at any
-      ``dt``, ``W``; cost O(1) per frame. With one window and regular frames (no
-      :class:`TimingJitter`) the same law is drawn with one normal per frame instead of two,
-      from the frames' exact ARMA(1,1) innovations form: with ``c = exp(-dt/tau)``,
-      ``X_m = xh_m + e_m``, ``xh_{m+1} = c xh_m + (c + b) e_m``, ``e_m ~ N(0, s^2)``, and
-      ``xh_1`` drawn from its stationary law; ``b`` and ``s^2`` follow from ``C(0)`` and
-      ``C(1)`` (``blurtrap.simulate._coeffs``, derivation there). Chunks then have even
+      ``dt``, ``W``; cost O(1) per frame. With a scalar exposure (not
+      :class:`ExposureWindows`) and regular frames (no :class:`TimingJitter`) the same law is
+      drawn with one normal per frame instead of two, from the frames' exact ARMA(1,1)
+      innovations form: with ``c = exp(-dt/tau)``, ``X_m = xh_m + e_m``,
+      ``xh_{m+1} = c xh_m + (c + b) e_m``, ``e_m ~ N(0, s^2)``, and ``xh_0`` drawn from its
+      stationary law; ``b`` and ``s^2`` follow from ``C(0)`` and ``C(1)``
+      (``blurtrap.simulate._coeffs``, derivation there). Chunks then have even
       lengths (`chunk_frames` is rounded up). With a :class:`PhotodiodeFilter` injection the
       position and the detector's filter state are advanced together as one exact linear
       Gaussian system (``blurtrap.simulate._linear``).
@@ -488,12 +490,13 @@ def simulate(
         P = {"rdead": rdead}
         innovations = method == "exact_frames" and not windows and not jitter
         if innovations:  # one normal per frame (see _coeffs.innovations_law)
-            P["ic"], P["icb"], P["is"], P["ix"] = co.innovations_law(
-                L[:, 0], np.maximum(dtf / tau, L[:, 0]))
+            r = np.maximum(dtf / tau, L[:, 0])
+            _, P["icb"], P["is"], P["ix"] = co.innovations_law(L[:, 0], r)
+            P["icm1"] = np.expm1(-r)  # the scans update by increments (_coeffs docstring)
             n_exp, n_dead = 0, 1
         elif method == "exact_frames":
-            e, p, sm, cx, sx = co.segment_law(L)
-            P.update(e=e, p=p, sm=sm, cx=cx, sx=sx)
+            _, p, sm, cx, sx = co.segment_law(L)
+            P.update(em1=np.expm1(-L), p=p, sm=sm, cx=cx, sx=sx)
             # window j (sorted) = sum_{s <= j} L_s m_s / a_j
             M = np.where(
                 np.arange(n_seg)[:, None] <= np.arange(n_win)[None, :],
@@ -541,7 +544,7 @@ def simulate(
             Wt = Wt / norm
             P["Wt"] = Wt[:, :, np.argsort(order)]
             if method == "exact":
-                P["A"], P["B"] = co.ou_step(h)
+                P["A"], P["B"] = co.ou_step(h)  # A = exp(-h) - 1: updates by increments
                 n_dead = 1
                 bias = co.trapezoid_bias(a_win, cum[None, :])
             else:

@@ -57,7 +57,9 @@ def test_segment_law_against_quadrature(L):
 
 
 @pytest.mark.parametrize("a, r", [(1e-4, 1e-3), (0.3, 0.3), (0.49, 2.0), (0.51, 0.51),
-                                  (2.0, 5.0), (20.0, 20.0), (800.0, 900.0)])
+                                  (2.0, 5.0), (20.0, 20.0), (800.0, 900.0),
+                                  (1e-6, 1e-6),  # c -> 1
+                                  (800.0, 800.0)])  # c underflows to 0, b ~ 6e-4 must not
 def test_innovations_law_against_quadrature(a, r):
     """The innovations form (one normal per frame) reproduces the frames' autocovariance
     C(n) = (1/a^2) int int e^{-|n r + t - s|} ds dt (units sigma, tau) at lags 0, 1, 2,

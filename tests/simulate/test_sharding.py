@@ -26,7 +26,8 @@ SCRIPT = textwrap.dedent(
     out = {"devices": len(jax.devices()), "cases": []}
     cases = [
         ("exact", dict(substeps=8, chunk_frames=5)),
-        ("exact_frames", dict(injections=(TimingJitter(0.05 * TAU),))),
+        ("exact_frames", dict(injections=(TimingJitter(0.05 * TAU),))),  # segment law
+        ("exact_frames", dict(chunk_frames=5)),  # innovations form
     ]
     for method, extra in cases:
         kw = dict(key=jax.random.key(3), n_traces=8, method=method, **extra)
@@ -68,7 +69,7 @@ def test_sharded_call_equals_unsharded_on_two_devices():
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["devices"] == 2
-    assert len(out["cases"]) == 2
+    assert len(out["cases"]) == 3
     for case in out["cases"]:
         assert case["shape"] == [2, 8, 12], case
         # the same numbers (same counters per trajectory), to float tolerance
