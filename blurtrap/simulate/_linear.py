@@ -89,7 +89,8 @@ def photodiode_coefficients(lam, alpha, a_exp, r_dead):
     time ``r = (dt - W)/tau``): the exact laws of one frame. Returns a dict of float64
     arrays: ``pe (G,3,2)``, ``le (G,3,3)`` (exposure transition of (x, z, J) and a noise
     square root), ``pd (G,2,2)``, ``ld (G,2,2)`` (dead time), ``l0 (G,2,2)`` (stationary
-    square root), ``inv_a (G,)``."""
+    square root), ``inv_a (G,)``. The (x, z) rows of ``pe`` and ``pd`` are the transitions
+    minus the identity (the scan updates by increments)."""
     g_n = len(a_exp)
     out = {k: [] for k in ("pe", "le", "pd", "ld", "l0")}
     for i in range(g_n):
@@ -101,13 +102,17 @@ def photodiode_coefficients(lam, alpha, a_exp, r_dead):
         a3[2, :2] = [al, 1.0 - al]
         g3 = np.diag([2.0, 0.0, 0.0])
         phi_e, q_e = discretize(a3, g3, float(a_exp[i]))
-        out["pe"].append(phi_e[:, :2])
+        # transitions of (x, z) minus the identity: the scan updates by increments,
+        # s' = s + (phi - 1) s + noise, which keeps float32 accurate for short steps
+        pe = phi_e[:, :2].copy()
+        pe[:2] -= np.eye(2)
+        out["pe"].append(pe)
         out["le"].append(_sqrt_psd(q_e))
         if r_dead[i] > 0:
             phi_d, q_d = discretize(a2, g2, float(r_dead[i]))
         else:
             phi_d, q_d = np.eye(2), np.zeros((2, 2))
-        out["pd"].append(phi_d)
+        out["pd"].append(phi_d - np.eye(2))
         out["ld"].append(_sqrt_psd(q_d))
         out["l0"].append(_sqrt_psd(_lyapunov(a2, g2)))
     res = {k: np.stack(v) for k, v in out.items()}
@@ -137,11 +142,14 @@ def _chunk(n: int, dtype: str, c, s0, key_frames, index):
         def step(carry, zi):
             x, y = carry  # trap position and filter state, (T,) each
             # explicit 2x2 / 3x3 products: elementwise over traces is faster than tiny dots
-            xw = pe[0, 0] * x + pe[0, 1] * y + le[0, 0] * zi[0] + le[0, 1] * zi[1] + le[0, 2] * zi[2]
-            yw = pe[1, 0] * x + pe[1, 1] * y + le[1, 0] * zi[0] + le[1, 1] * zi[1] + le[1, 2] * zi[2]
+            # (the (x, z) rows of pe and pd are the transitions minus the identity)
+            xw = x + (pe[0, 0] * x + pe[0, 1] * y
+                      + le[0, 0] * zi[0] + le[0, 1] * zi[1] + le[0, 2] * zi[2])
+            yw = y + (pe[1, 0] * x + pe[1, 1] * y
+                      + le[1, 0] * zi[0] + le[1, 1] * zi[1] + le[1, 2] * zi[2])
             jw = pe[2, 0] * x + pe[2, 1] * y + le[2, 0] * zi[0] + le[2, 1] * zi[1] + le[2, 2] * zi[2]
-            x = pd[0, 0] * xw + pd[0, 1] * yw + ld[0, 0] * zi[3] + ld[0, 1] * zi[4]
-            y = pd[1, 0] * xw + pd[1, 1] * yw + ld[1, 0] * zi[3] + ld[1, 1] * zi[4]
+            x = xw + (pd[0, 0] * xw + pd[0, 1] * yw + ld[0, 0] * zi[3] + ld[0, 1] * zi[4])
+            y = yw + (pd[1, 0] * xw + pd[1, 1] * yw + ld[1, 0] * zi[3] + ld[1, 1] * zi[4])
             return (x, y), jw * cg["inv_a"]
 
         (x, y), frames = jax.lax.scan(step, (s[:, 0], s[:, 1]), z)

@@ -50,3 +50,27 @@ def test_float32_decay_follows_float64(monkeypatch, case):
     d32 = _decay(monkeypatch, case, jnp.float32)
     assert d64[-1] < 0.2  # ~2 relaxation times
     np.testing.assert_allclose(d32, d64, rtol=2e-5)
+
+
+def test_float32_photodiode_system_decay_follows_float64():
+    """The same for the exact photodiode system (PhotodiodeFilter), whose (x, z) transitions
+    are stored minus the identity: exposure 1e-4 tau, dead time 1e-4 tau, filter corner at
+    lam = 2 pi f_3dB tau = 3, noise set to zero, start (x, z) = (1, 1)."""
+    from blurtrap.simulate import _linear
+
+    lam, alpha, a, rd = [3.0], [0.3], [1e-4], [1e-4]
+    coef = _linear.photodiode_coefficients(np.array(lam), np.array(alpha), np.array(a),
+                                           np.array(rd))
+    # the test has power: the float32 diagonal of the dead-time transition is off
+    phi = coef["pd"][0, 0, 0] + 1.0
+    assert abs(float(np.float32(phi)) - phi) > 1e-9
+    n = 10000
+    out = {}
+    for dtype in ("float32", "float64"):
+        c = {k: jnp.asarray(v if k not in ("le", "ld") else 0 * v, dtype=dtype)
+             for k, v in coef.items()}
+        s0 = jnp.ones((1, 2, 2), dtype)
+        _, frames = _linear._chunk(n, dtype, c, s0, jax.random.key(0)[None], jnp.int32(0))
+        out[dtype] = np.asarray(frames, np.float64)[0, 0]
+    assert out["float64"][-1] < 0.2
+    np.testing.assert_allclose(out["float32"], out["float64"], rtol=2e-5)
