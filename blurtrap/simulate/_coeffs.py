@@ -96,7 +96,8 @@ def cond_avg_var(a):
 def segment_law(length):
     """Coefficients of the exact segment draw (all float64 arrays of ``length``'s shape).
 
-    Returns ``(e, p, s_m, c_x, s_x)`` such that, with independent standard normals z1, z2,
+    Returns ``(e - 1, p, s_m, c_x, s_x)`` (``e = e^{-L}``; ``e - 1 = expm1(-L)`` for the
+    update by increments) such that, with independent standard normals z1, z2,
 
         m   = p x0 + s_m z1
         x_L = e x0 + c_x z1 + s_x z2
@@ -104,7 +105,6 @@ def segment_law(length):
     reproduces the joint Gaussian law in the module docstring.
     """
     L = np.asarray(length, dtype=np.float64)
-    e = np.exp(-L)
     p = phi1(L)
     g = cond_avg_var(L)
     vx = -np.expm1(-2.0 * L)
@@ -113,15 +113,16 @@ def segment_law(length):
     safe = np.where(g > 0, s_m, 1.0)
     c_x = np.where(g > 0, cxm / safe, 0.0)
     s_x = np.sqrt(np.maximum(vx - c_x * c_x, 0.0))
-    return e, p, s_m, c_x, s_x
+    return np.expm1(-L), p, s_m, c_x, s_x
 
 
 _D_C = np.array([2.0 / math.factorial(2 * k + 3) for k in range(_NT)])  # D/a in powers of a^2
 
 
 def innovations_law(a, r):
-    """Coefficients ``(c, c + b, s, sqrt(v))`` of the frames' innovations form (module
-    docstring) for exposure ``a = W/tau`` and frame interval ``r = dt/tau >= a`` (float64)."""
+    """Coefficients ``(c - 1, c + b, s, sqrt(v))`` of the frames' innovations form (module
+    docstring; ``c - 1 = expm1(-r)`` for the update by increments) for exposure ``a = W/tau``
+    and frame interval ``r = dt/tau >= a`` (float64)."""
     a = np.asarray(a, dtype=np.float64)
     r = np.asarray(r, dtype=np.float64)
     c = np.exp(-r)
@@ -135,7 +136,7 @@ def innovations_law(a, r):
     b = 2.0 * rho / (1.0 + np.sqrt(np.maximum(1.0 - 4.0 * rho * rho, 0.0)))
     s2 = g0 / (1.0 + b * b)
     v = (c + b) ** 2 * s2 / one_c2
-    return c, c + b, np.sqrt(s2), np.sqrt(v)
+    return np.expm1(-r), c + b, np.sqrt(s2), np.sqrt(v)
 
 
 def ou_step(h):

@@ -490,13 +490,12 @@ def simulate(
         P = {"rdead": rdead}
         innovations = method == "exact_frames" and not windows and not jitter
         if innovations:  # one normal per frame (see _coeffs.innovations_law)
-            r = np.maximum(dtf / tau, L[:, 0])
-            _, P["icb"], P["is"], P["ix"] = co.innovations_law(L[:, 0], r)
-            P["icm1"] = np.expm1(-r)  # the scans update by increments (_coeffs docstring)
+            P["icm1"], P["icb"], P["is"], P["ix"] = co.innovations_law(
+                L[:, 0], np.maximum(dtf / tau, L[:, 0]))
             n_exp, n_dead = 0, 1
         elif method == "exact_frames":
-            _, p, sm, cx, sx = co.segment_law(L)
-            P.update(em1=np.expm1(-L), p=p, sm=sm, cx=cx, sx=sx)
+            em1, p, sm, cx, sx = co.segment_law(L)
+            P.update(em1=em1, p=p, sm=sm, cx=cx, sx=sx)
             # window j (sorted) = sum_{s <= j} L_s m_s / a_j
             M = np.where(
                 np.arange(n_seg)[:, None] <= np.arange(n_win)[None, :],

@@ -47,7 +47,8 @@ def test_segment_law_against_quadrature(L):
     inner = lambda s: mp.quad(lambda t: c(s, t), [0, s])  # noqa: E731
     vm = float(2 * mp.quad(inner, [0, Lm]) / Lm**2)
     cxm = float(mp.quad(lambda t: c(t, Lm), [0, Lm]) / Lm)
-    e, p, s_m, c_x, s_x = co.segment_law(np.array(L))
+    em1, p, s_m, c_x, s_x = co.segment_law(np.array(L))
+    np.testing.assert_allclose(em1, float(mp.expm1(-Lm)), rtol=1e-15)
     np.testing.assert_allclose(s_m**2, vm, rtol=1e-7)
     np.testing.assert_allclose(c_x * s_m, cxm, rtol=1e-8)
     np.testing.assert_allclose(c_x**2 + s_x**2, 1 - np.exp(-2 * L), rtol=1e-10)
@@ -78,9 +79,11 @@ def test_innovations_law_against_quadrature(a, r):
         # kink at u = 0; e^{-u} varies on the scale 1
         return mp.quad(f, mp.linspace(-am, am, max(41, int(4 * a) + 1))) / am**2
 
-    c, cb, s, sv = co.innovations_law(np.array(a), np.array(r))
+    cm1, cb, s, sv = co.innovations_law(np.array(a), np.array(r))
+    np.testing.assert_allclose(cm1, float(mp.expm1(-rm)), rtol=1e-15)
+    c = np.exp(-r)
     b = cb - c
-    assert abs(b) < 1 and abs(c - np.exp(-r)) <= 1e-15
+    assert abs(b) < 1
     # X_m = xh_m + e_m, xh_{m+1} = c xh_m + (c + b) e_m, var(xh) = v, var(e) = s^2
     g0 = sv**2 + s**2
     g1 = c * sv**2 + cb * s**2
