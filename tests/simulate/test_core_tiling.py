@@ -43,7 +43,7 @@ def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
     tiled, tiled_tiles = run(256)  # tiles of 256 trajectories: 3 tiles, the last one padded
     # both runs were traced, one without and one with tiles
     assert untiled_tiles == {None} and tiled_tiles == {256}, (untiled_tiles, tiled_tiles)
-    # the scan really ran in tiles (exact: 10 rows per frame, exact_frames: 4)
+    # the scan really ran in tiles (exact: 10 rows per frame, exact_frames: 4, innovations: 1)
     innovations = not isinstance(kw["exposure"], ExposureWindows)
     rows = {"exact": (9, 1, 1), "exact_frames": (0, 1, 1 if innovations else 2)}[method]
     cfg = _core.CoreConfig(method, rows[0], rows[1], rows[2], rows[2], False, None, "float64",
