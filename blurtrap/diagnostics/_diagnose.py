@@ -40,9 +40,14 @@ SPECTRAL_CANDIDATES = ("motion_blur", "aliasing", "tracking_noise", "drift", "li
                        "exposure_kernel", "detector_filter", "hydrodynamics")
 RELATION_CANDIDATES = ("power_offset", "laser_heating")
 _CORE_FLAGS = ("motion_blur", "aliasing", "tracking_noise")
+#: Physically coupled effects tried together when the model lacks all of them: a camera both
+#: blurs (exposure average) and samples (folding). From the naive model each alone makes the
+#: fit worse (blur removes high-frequency power that only the folded spectrum gives back), so
+#: a one-at-a-time search would never find the pair.
+COUPLED_GROUPS = {"motion_blur+aliasing": ("motion_blur", "aliasing")}
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, repr=False)
 class Candidate:
     """A candidate missing effect. ``delta_loglik`` = log-likelihood gain when it is added,
     ``delta_aic`` = AIC(model) - AIC(model + effect): positive means the effect improves the
@@ -58,6 +63,13 @@ class Candidate:
     fit: CalibrationResult | None = None
     model: object = None  # the TrapModel with this effect added (likelihood effects only)
     plausible: bool = True  # False: the refit needs physically impossible parameters
+
+    def __repr__(self) -> str:
+        da = "n/a" if self.delta_aic is None else f"{self.delta_aic:.2f}"
+        flags = ("significant" if self.significant else "not significant") + (
+            "" if self.plausible else ", IMPLAUSIBLE")
+        return (f"Candidate({self.effect!r}, dAIC = {da}, p = {self.p_value:.3g}, {flags}: "
+                f"{self.evidence})")
 
     def to_dict(self):
         return {"effect": self.effect, "delta_loglik": self.delta_loglik, "dof": self.dof,
@@ -124,7 +136,30 @@ def _band_ratio(f, ratio, w, lo, hi):
     return float(np.sum(ratio[sel] * w[sel]) / np.sum(w[sel])), int(np.sum(sel))
 
 
+def _signature(ratio: float, n: int, excess: bool) -> bool:
+    """Does a band's data/model ratio show an excess (or deficit) beyond its noise? Each
+    ordinate's ratio has SD ~1 under the model, so a band mean of n ordinates has SD
+    ~1/sqrt(n); 2 SD is the bar for naming an effect in words."""
+    if not np.isfinite(ratio) or n == 0:
+        return False
+    dev = ratio - 1.0 if excess else 1.0 - ratio
+    return dev > 2.0 / math.sqrt(n)
+
+
+# effect -> (what its signature is, True for an excess / False for a deficit near Nyquist)
+_HIGH_F = {"motion_blur": ("deficit rising toward fs/2 (motion blur)", False),
+           "aliasing": ("excess near Nyquist (aliasing)", True),
+           "motion_blur+aliasing": ("high-frequency shape of a camera's blur and folding", None),
+           "tracking_noise": ("flat excess floor (tracking noise)", True),
+           "exposure_kernel": ("high-frequency shape unlike sinc^2 (exposure kernel)", None),
+           "detector_filter": ("high-frequency low-pass deficit (detector filter)", False),
+           "hydrodynamics": ("high-frequency shape of frequency-dependent friction", None)}
+
+
 def _evidence(effect: str, fit: CalibrationResult, recs) -> str:
+    """The residual evidence for ``effect`` in words. The effect is named as the cause only
+    when the band ratio deviates in its direction by more than 2 SD; otherwise the words say
+    that its signature is absent (the likelihood test may still favour it)."""
     f, ratio, w = _bands(fit)
     fs = 1.0 / float(recs[0].frame_interval)
     fmin = float(np.min(f[w > 0])) if np.any(w > 0) else 0.0
@@ -132,19 +167,21 @@ def _evidence(effect: str, fit: CalibrationResult, recs) -> str:
     if effect == "drift":
         hi = max(5 * fmin, min(0.05 * fc, 0.01 * fs))
         r, n = _band_ratio(f, ratio, w, 0, hi)
-        return f"power below {hi:.3g} Hz is {r:.3g}x the model ({n} ordinates): drift"
-    if effect in ("motion_blur", "aliasing", "tracking_noise", "exposure_kernel",
-                  "detector_filter", "hydrodynamics"):
+        verdict = ("excess at the lowest frequencies: drift" if _signature(r, n, True)
+                   else "no low-frequency excess (not the signature of drift)")
+        return f"power below {hi:.3g} Hz is {r:.3g}x the model ({n} ordinates): {verdict}"
+    if effect in _HIGH_F:
         r_hi, n_hi = _band_ratio(f, ratio, w, 0.7 * fs / 2, fs / 2)
-        r_mid, _ = _band_ratio(f, ratio, w, 0.2 * fs / 2, 0.5 * fs / 2)
-        what = {"motion_blur": "deficit rising toward fs/2 (motion blur)",
-                "aliasing": "excess near Nyquist (aliasing)",
-                "tracking_noise": "flat excess floor (tracking noise)",
-                "exposure_kernel": "high-frequency shape unlike sinc^2 (exposure kernel)",
-                "detector_filter": "high-frequency low-pass deficit (detector filter)",
-                "hydrodynamics": "high-frequency shape of frequency-dependent friction"}[effect]
+        r_mid, n_mid = _band_ratio(f, ratio, w, 0.2 * fs / 2, 0.5 * fs / 2)
+        what, excess = _HIGH_F[effect]
+        if excess is None:  # a shape: any significant high- or mid-band misfit
+            seen = (_signature(r_hi, n_hi, True) or _signature(r_hi, n_hi, False)
+                    or _signature(r_mid, n_mid, True) or _signature(r_mid, n_mid, False))
+        else:
+            seen = _signature(r_hi, n_hi, excess)
+        verdict = what if seen else f"within noise of the model (no {what.split(' (')[0]})"
         return (f"data/model near Nyquist {r_hi:.3g} ({n_hi} ordinates), at 0.1-0.25 fs "
-                f"{r_mid:.3g}: {what}")
+                f"{r_mid:.3g}: {verdict}")
     if effect == "line_noise":
         j = int(np.argmax(np.where(w > 0, ratio, 0)))
         return f"isolated spike at {f[j]:.4g} Hz, {ratio[j]:.3g}x the model: line noise"
@@ -153,6 +190,13 @@ def _evidence(effect: str, fit: CalibrationResult, recs) -> str:
     if effect == "laser_heating":
         return "gamma falls with laser power (viscosity of heated water)"
     return ""
+
+
+_ADDING = "; adding it: gof p "
+
+
+def _gof_change(before: dict, after: dict) -> str:
+    return f"{_ADDING}{before['p_value']:.2g} -> {after['p_value']:.2g}"
 
 
 def _line_candidate(fit: CalibrationResult, half_window: int = 500, guard: int = 2,
@@ -225,6 +269,35 @@ def _plausible(name: str, params: dict, recs) -> tuple[bool, str]:
     return True, ""
 
 
+#: A candidate that is not significant but moves k or gamma by more than this many of the base
+#: fit's standard errors makes the base fit's errors dishonest: the data cannot tell the two
+#: models apart, yet the answer depends on the choice (e.g. tracking noise on a W = dt camera
+#: recording: blur + aliasing without noise fits as well, with k 14 SE low).
+SENSITIVITY_SE = 2.0
+
+
+def _sensitivity_notes(base: CalibrationResult, ranked, screened) -> list[str]:
+    out = []
+    errs = dict(zip(base.param_names, base.errors))
+    for c in ranked:
+        params = screened.get(c.effect)
+        if c.significant or params is None or not c.plausible:
+            continue
+        shifts = []
+        for name, v0 in base.params.items():
+            if not (name == "gamma" or name == "k" or name.startswith("k[")) or name not in params:
+                continue
+            e = errs[name]
+            if np.isfinite(e) and e > 0 and abs(params[name] - v0) > SENSITIVITY_SE * e:
+                shifts.append(f"{name} by {(params[name] - v0) / e:+.1f} SE")
+        if shifts:
+            out.append(f"{c.effect} is not significant, but adding it moves {', '.join(shifts)}: "
+                       "the data cannot tell the two models apart and the result depends on the "
+                       f"choice; prefer the physically complete model (add {c.effect} if the "
+                       "instrument has it) and quote its larger errors")
+    return out
+
+
 @float64_scope
 def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str | None = None,
              add=()) -> Diagnosis:
@@ -266,6 +339,8 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
         if not mdl.blur or len({float(r.exposure) for r in recs}) < 2:
             # one exposure: the kernel shape is absorbed by k, gamma, eps^2 (exact ARMA(1,1))
             candidates = [c for c in candidates if c != "exposure_kernel"]
+        candidates += [g for g, members in COUPLED_GROUPS.items()
+                       if not any(mdl.has(e) for e in members)]
         if multi_power and k == "linear_power":
             candidates += [c for c in RELATION_CANDIDATES if not mdl.has(c)]
         candidates += ["anharmonicity"]
@@ -304,9 +379,9 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
             T = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
             config = {"frequency": f0, "width": 1.0 / T}
         try:
-            test_model = mdl.add(name, **config)
+            test_model = mdl.add(*COUPLED_GROUPS.get(name, (name,)), **config)
             params, nll1, gof1, ok = screen_model(recs, test_model, k, start=warm)
-            if name in _CORE_FLAGS:
+            if name in _CORE_FLAGS or name in COUPLED_GROUPS:
                 # adding a core effect can move k and gamma far from the misspecified base
                 # fit: also try the closed-form start and keep the better optimum
                 cold = screen_model(recs, test_model, k, start=None)
@@ -334,7 +409,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
                   "spectrum: line noise")
         if not ok:
             ev += " (refit did not converge)"
-        ev += f"; adding it: gof p {base.gof['p_value']:.2g} -> {gof1['p_value']:.2g}"
+        ev += _gof_change(base.gof, gof1)
         plausible, why = _plausible(name, params, recs)
         if not plausible:
             ev += f"; IMPLAUSIBLE: {why}"
@@ -357,11 +432,14 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
             try:
                 best_fit = calibrate(recs, method="likelihood", likelihood="whittle",
                                      model=top.model, k=k, start=start, strict=False)
-                ranked[0] = dataclasses.replace(top, fit=best_fit)
+                # the evidence quotes the goodness of fit of the fit it carries
+                ev = top.evidence.split(_ADDING)[0] + _gof_change(base.gof, best_fit.gof)
+                ranked[0] = dataclasses.replace(top, fit=best_fit, evidence=ev)
                 break
             except (FitError, ValueError) as exc:
                 if start is None:
                     notes.append(f"full refit with {top.effect} failed: {exc}")
+    notes += _sensitivity_notes(base, ranked, screened)
     gof_ok = base.gof["p_value"] >= threshold
     adequate = gof_ok and not any(c.significant for c in ranked)
     if not gof_ok and not any(c.significant for c in ranked):
@@ -448,6 +526,7 @@ def select_model(data, model=None, *, max_steps: int = 3, alpha: float = 0.05,
         added.append(best.effect)
         if candidates is not None:
             candidates = [c for c in candidates if c != best.effect]
+    notes += [n for n in steps[-1].notes if "is not significant, but adding it moves" in n]
     return Selection(model=mdl, adequate=steps[-1].adequate, steps=tuple(steps),
                      added=tuple(added), notes=tuple(notes))
 
