@@ -13,7 +13,7 @@ import math
 import sys
 
 _METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
-            "equipartition")
+            "equipartition", "allan")
 _MODELS = ("standard", "blur", "naive", "naive_aliased")
 _K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 

@@ -1,5 +1,7 @@
 """Estimators: variances, spectra, exact and Whittle likelihoods, joint fits."""
 
+from ._allan import AllanVariance as AllanVariance
+from ._allan import allan_variance as allan_variance
 from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
 from ._calibrate import calibrate as calibrate

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._config import float64_scope, warn_if_float32
 from ..physics._constants import BOLTZMANN
+from ._allan import fit_allan
 from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton, fit_nll_only
 from ._models import TrapModel, get_model
 from ._problems import (
@@ -29,7 +30,7 @@ from ._result import CalibrationResult, FitError
 from ._variance import VarianceArgs, empirical_variance_se, fit_variances
 
 METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
-           "equipartition")
+           "equipartition", "allan")
 
 
 def as_recordings(data) -> list:
@@ -556,6 +557,27 @@ def _fit_variance(recs, layout, model, method_name, notes):
     return _assemble(recs, layout, model, method_name, p, cov, gof, notes)
 
 
+def _fit_allan(recs, layout, model, notes):
+    """k, gamma, eps^2 from the overlapping Allan variance (exact expectation and covariance,
+    iterated GLS); errors from the GLS information, goodness of fit from its chi^2."""
+    if model.extra or not model.alias:
+        raise ValueError("method 'allan' fits the closed-form frame model (naive, blur or "
+                         f"standard); got model {model.name!r}")
+    scale = _start_vector(recs, layout, model.noise)
+    p, cov, chi2, dof, ok, pd, est = fit_allan(recs, layout, rec_meta(recs), model.blur, scale)
+    if not bool(ok):
+        raise FitError(f"allan: the fit did not converge; parameters {layout.names}")
+    if not bool(pd):
+        raise FitError(f"allan: parameters {layout.names} are not identifiable from these "
+                       "Allan variances (dt >> tau leaves no temporal information)")
+    gof = {"test": "chi2 of Allan variances (exact covariance)", "statistic": float(chi2),
+           "dof": dof, "p_value": float(chi2_sf(float(chi2), dof)) if dof > 0 else float("nan")}
+    notes = list(notes) + [f"allan: overlapping Allan variance at {len(e.m)} octave cluster "
+                           f"sizes (1..{int(e.m[-1])} frames) of {e.n_frames} frames" for e in est]
+    return _assemble(recs, layout, model, "allan", p, cov, gof, notes,
+                     extras={"allan": [e.to_dict() for e in est]})
+
+
 def _equipartition(recs, diffusion, pade):
     ks, kerr = [], []
     notes = []
@@ -860,6 +882,8 @@ def calibrate(
                          "the record allows)")
         res = _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict)
         return _check_psd_blocks(res, recs, int(nb), explicit=n_blocks is not None)
+    if method == "allan":
+        return _fit_allan(recs, layout, mdl, notes)
     if method in ("variance_vs_exposure", "variance_vs_power"):
         if method == "variance_vs_power" and k != "linear_power":
             warnings.warn("variance_vs_power is usually run with k='linear_power'", stacklevel=2)

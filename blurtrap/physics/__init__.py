@@ -3,6 +3,7 @@
 Imports nothing else of blurtrap. SI units throughout.
 """
 
+from ._allan import allan_variance_model as allan_variance_model
 from ._blur import (
     blur_factor as blur_factor,
 )
