@@ -98,8 +98,9 @@ def allan_variance(data, frame_interval=None, *, m=None) -> AllanVariance:
 
 def _block_sum_variance_np(n, c0, c1, r):
     """NumPy twin of ``physics._allan.block_sum_variance`` (tested against it): the covariance
-    needs ~K^2/2 pairs of lag windows of varying length, which as eager JAX calls took 12 s
-    per matrix at 65 536 frames against 0.2 s here (each new window length recompiles)."""
+    needs ~K^2/2 pairs of lag windows of varying length; as eager JAX calls (each new window
+    length recompiles) one 14 x 14 matrix at 65 536 frames took 11.8 s against 1.8 s here,
+    measured on the same (loaded) machine."""
     u = -np.expm1(-r)
     geo = (n * u + np.expm1(-r * n)) / u**2
     return np.where(n > 0, n * c0 + 2.0 * c1 * geo, 0.0)
