@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
 from ._units import (
     ALLOWED_UNITS,

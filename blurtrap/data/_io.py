@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
 from ._recording_set import RecordingSet
 from ._units import canonical_unit, check_pixel_size, to_metres

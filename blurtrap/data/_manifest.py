@@ -17,7 +17,7 @@ import re
 from decimal import Decimal
 from pathlib import Path
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._csv import load_csv, write_csv
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
 from ._recording_set import RecordingSet

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._recording import Recording, thaw
 from ._recording_set import RecordingSet
 

@@ -13,7 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 
 #: Default tolerance on time-stamp irregularity, relative to the frame interval.
 DEFAULT_TIMING_TOLERANCE = 1e-3
