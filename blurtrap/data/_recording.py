@@ -9,19 +9,40 @@ from __future__ import annotations
 
 import math
 import types
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from .._constants import DEFAULT_TEMPERATURE
+from ._units import canonical_unit
 
 #: Default tolerance on time-stamp irregularity, relative to the frame interval.
 DEFAULT_TIMING_TOLERANCE = 1e-3
 # Heuristic unit-slip thresholds (disabled with check_units=False).
 _MAX_PLAUSIBLE_INTERVAL_S = 1.0
-_MAX_PLAUSIBLE_POSITION_STD_M = 1e-3
 _MIN_PLAUSIBLE_TEMPERATURE_K = 100.0
 _MAX_PLAUSIBLE_LASER_POWER_W = 10.0
+
+# Plausible fluctuation of a trapped bead: the standard deviation of the positions (mean
+# removed), in metres. The thermal std sqrt(kB T / k) at 295 K is 203 nm for a very soft trap
+# (k = 1e-7 N/m) and 0.64 nm for a very stiff one (k = 1e-2 N/m). Motion blur lowers the
+# measured variance by S(W / tau) ~ 2 tau / W for W >> tau; tracking noise and drift only add.
+# - Lower bound 2e-11 m (0.02 nm): 32x below the stiffest trap's thermal std, i.e. the
+#   variance may be blurred down 1000-fold (W ~ 2000 tau, beyond which a record holds almost
+#   no trap information) before a genuine trace trips it. Unit slips land below it: metres
+#   declared as nm give ~1e-17 m, um declared as nm give 1e-12..2e-10 m (caught up to a true
+#   std of 20 nm; a softer trap's um-as-nm trace overlaps real stiff traps and cannot be told
+#   apart by its size alone).
+# - Upper bound 1e-5 m (10 um): 50x the softest trap's thermal std; a trap holds a bead only
+#   within about its radius (0.1-3 um), so a bead wandering by 10 um is not trapped. nm
+#   declared as metres give metres; nm declared as um give 1e-6..2e-4 m (caught above a true
+#   std of 10 nm).
+_MIN_PLAUSIBLE_POSITION_STD_M = 2e-11
+_MAX_PLAUSIBLE_POSITION_STD_M = 1e-5
+_TYPICAL_POSITION_STD_M = 1e-8  # to pick the likeliest unit when several would fit
+_UNIT_METRES = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
+_UNIT_WORDS = {"m": "metres", "mm": "mm", "um": "um", "nm": "nm", "px": "px"}
 
 
 class TimingJitter(NamedTuple):
@@ -87,7 +108,7 @@ def _scalar(name: str, value, unit: str) -> float:
     return v
 
 
-def _positions(positions, check_units: bool) -> tuple[np.ndarray, str | None]:
+def _positions(positions, check_units: bool, declared_unit: str = "m") -> tuple[np.ndarray, str | None]:
     try:
         arr = np.asarray(positions)
     except Exception as e:
@@ -127,14 +148,70 @@ def _positions(positions, check_units: bool) -> tuple[np.ndarray, str | None]:
             f"positions is constant (zero variance; every value = {float(arr[0])!r}): a trapped "
             "bead always fluctuates, so this is not a position trace"
         )
-    std = float(np.std(arr)) if check_units else 0.0  # (no overflow for |x| > 1e154 unchecked)
-    if std > _MAX_PLAUSIBLE_POSITION_STD_M:
-        raise ValueError(
-            f"positions have standard deviation {_g(std)} m, larger than 1 mm: positions look "
-            "like nm or pixels, not metres. Convert to metres (e.g. from_arrays(..., "
-            "position_unit='nm')), or pass check_units=False"
-        )
+    if check_units:  # (unchecked: no overflow in np.std for |x| > 1e154)
+        _check_position_scale(float(np.std(arr)), declared_unit)
     return arr, note
+
+
+def _declared_unit(metadata) -> str:
+    """The unit the positions were given in (``metadata["position_unit"]``, which the loaders
+    and from_arrays set), or "m"."""
+    unit = metadata.get("position_unit") if isinstance(metadata, Mapping) else None
+    try:
+        return canonical_unit(unit)
+    except ValueError:
+        return "m"
+
+
+def _likely_unit(std: float, declared: str) -> str | None:
+    """The unit (other than `declared`) in which the numbers give a plausible std, if any."""
+    if declared not in _UNIT_METRES:
+        return None
+    best, best_dist = None, math.inf
+    for unit, metres in _UNIT_METRES.items():
+        if unit == declared:
+            continue
+        true_std = std * metres / _UNIT_METRES[declared]
+        if _MIN_PLAUSIBLE_POSITION_STD_M <= true_std <= _MAX_PLAUSIBLE_POSITION_STD_M:
+            dist = abs(math.log(true_std / _TYPICAL_POSITION_STD_M))
+            if dist < best_dist:
+                best, best_dist = unit, dist
+    return best
+
+
+def _check_position_scale(std: float, declared: str) -> None:
+    """Raise if the positions' std [m] is outside what any trapped bead shows (a unit slip)."""
+    low = std < _MIN_PLAUSIBLE_POSITION_STD_M
+    if not (low or std > _MAX_PLAUSIBLE_POSITION_STD_M):
+        return
+    what = (
+        f"below {_g(_MIN_PLAUSIBLE_POSITION_STD_M)} m (0.02 nm), less than a bead fluctuates in "
+        "even the stiffest trap (k = 1e-2 N/m: 0.6 nm)"
+        if low
+        else f"above {_g(_MAX_PLAUSIBLE_POSITION_STD_M)} m (10 um), more than a bead fluctuates "
+        "in even the softest trap (k = 1e-7 N/m: 0.2 um)"
+    )
+    likely = _likely_unit(std, declared)
+    word = _UNIT_WORDS.get(declared, declared)
+    if declared == "px":
+        slip = "positions look like they are not pixels of the given pixel_size_m"
+    elif likely is None:
+        slip = f"positions do not look like {word}"
+    elif declared == "m" and not low:
+        slip = f"positions look like {_UNIT_WORDS[likely]} or pixels, not metres"
+    else:
+        slip = f"positions look like {_UNIT_WORDS[likely]} declared as {word}"
+    fix = (
+        f"declare the unit the numbers are in (e.g. position_unit='{likely}' or a column "
+        f"x_{likely}; arrays in metres need no unit)"
+        if likely
+        else "check the position unit (and pixel_size_m)"
+    )
+    raise ValueError(
+        f"positions have standard deviation {_g(std)} m, {what}: {slip}. Expected positions "
+        f"in metres after conversion from the declared unit {declared!r}; {fix}, or pass "
+        "check_units=False"
+    )
 
 
 def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: bool):
@@ -222,7 +299,9 @@ class Recording:
     - `allow_irregular`: keep irregular time stamps instead of raising; see `timing_jitter`.
     - `timing_tolerance`: relative tolerance for time stamps (default 1e-3).
     - `check_units`: run the unit-slip heuristics (temperature < 100 K, intervals > 1 s,
-      position std > 1 mm, laser power > 10 W). Default True.
+      position std outside 2e-11..1e-5 m, laser power > 10 W). Default True. The position
+      check names the likely unit, using ``metadata["position_unit"]`` (set by the loaders
+      and :func:`from_arrays`) as the declared one.
 
     **Raises:** ``ValueError`` for any invalid or implausible input, with the value and a hint.
     """
@@ -258,7 +337,7 @@ class Recording:
         check_units: bool = True,
     ):
         check_units = bool(check_units)
-        pos, dtype_note = _positions(positions, check_units)
+        pos, dtype_note = _positions(positions, check_units, _declared_unit(metadata))
 
         dt = _scalar("frame_interval", frame_interval, "s")
         if dt <= 0:

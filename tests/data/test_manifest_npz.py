@@ -186,6 +186,25 @@ def test_manifest_errors(tmp_path, doc, match):
         load_manifest(write_manifest(tmp_path, doc))
 
 
+@pytest.mark.parametrize(
+    "csv_text, match",
+    [
+        ("t_s,x_nm\n0,0.001\n0.001,0.002\n0.002,-0.001\n", r"um declared as nm"),
+        ("t_s,x_nm\n0,1e-9\n0.001,2e-9\n0.002,-1e-9\n", r"metres declared as nm"),
+        ("t_s,x_um\n0,10\n0.001,20\n0.002,-10\n", r"nm declared as um"),
+    ],
+)
+def test_manifest_position_unit_slips(tmp_path, csv_text, match):
+    unit = csv_text.split(",x_")[1].split("\n")[0]
+    p = write_manifest(tmp_path, {"position_unit": unit, "recordings": [entry()]}, csv_text)
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: positions have "
+                       r"standard deviation .*positions look like " + match):
+        load_manifest(p)
+    p = write_manifest(tmp_path, {"position_unit": unit,
+                                  "recordings": [entry(check_units=False)]}, csv_text)
+    assert load_manifest(p)[0].n_frames == 3
+
+
 def test_manifest_row_error_names_manifest_csv_and_line(tmp_path):
     p = write_manifest(
         tmp_path, {"position_unit": "nm", "recordings": [entry()]}, "t_s,x_nm\n0,1\n0.001,x\n"

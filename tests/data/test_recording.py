@@ -200,3 +200,83 @@ def test_accepts_jax_arrays(rng):
     r = Recording(jnp.asarray(x), frame_interval=jnp.asarray(DT), exposure=W)
     np.testing.assert_array_equal(r.positions, x)
     assert isinstance(r.positions, np.ndarray)
+
+
+# ---- unit slips in the position scale (both directions) ----------------------------------------
+KT = 1.380649e-23 * 295.0
+SCALE = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
+WORD = {"m": "metres", "mm": "mm", "um": "um", "nm": "nm"}
+
+
+def _gauss(std, n=400):
+    x = np.random.default_rng(7).standard_normal(n)
+    return x / x.std() * std
+
+
+@pytest.mark.parametrize("k", [1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2])
+@pytest.mark.parametrize("blur", [1.0, 1e-3])
+@pytest.mark.parametrize("unit", ["m", "um", "nm"])
+def test_every_physical_trap_passes_the_scale_check(k, blur, unit):
+    """Thermal std sqrt(kT/k) from very soft (1e-7 N/m) to very stiff (1e-2 N/m) traps, with
+    the variance blurred down up to 1000-fold, declared in the right unit: accepted."""
+    from blurtrap.data import from_arrays
+
+    std = np.sqrt(KT / k * blur)
+    r = from_arrays(_gauss(std) / SCALE[unit], frame_interval=DT, exposure=W, position_unit=unit)
+    assert r.positions.std() == pytest.approx(std, rel=1e-9)
+
+
+SLIPS = [(true, declared) for true in SCALE for declared in SCALE if true != declared]
+
+
+@pytest.mark.parametrize("true_unit, declared", SLIPS, ids=[f"{t}-as-{d}" for t, d in SLIPS])
+@pytest.mark.parametrize("true_std", [0.64e-9, 1e-8, 2e-7])
+def test_unit_slips_of_a_physical_trace_are_caught_and_named(true_unit, declared, true_std):
+    """The numbers of a real trace (std 0.64 nm .. 200 nm) written in one unit and declared
+    in another: whenever the result is outside any trapped bead's range it is an error that
+    names the slip (for a typical 10 nm trace, the exact units), else it passes; with
+    check_units=False it is always accepted."""
+    from blurtrap.data import from_arrays
+
+    numbers = _gauss(true_std) / SCALE[true_unit]
+    seen = true_std * SCALE[declared] / SCALE[true_unit]  # the std the loader sees [m]
+    kw = dict(frame_interval=DT, exposure=W, position_unit=declared)
+    if 2e-11 <= seen <= 1e-5:
+        from_arrays(numbers, **kw)
+        return
+    with pytest.raises(ValueError, match=r"positions have standard deviation .* m, (below|above)") as e:
+        from_arrays(numbers, **kw)
+    msg = str(e.value)
+    assert "check_units=False" in msg and f"declared unit {declared!r}" in msg
+    if true_std == 1e-8:
+        if declared == "m" and seen > 1e-5:
+            assert f"positions look like {WORD[true_unit]} or pixels, not metres" in msg
+        else:
+            assert f"positions look like {WORD[true_unit]} declared as {WORD[declared]}" in msg
+    assert from_arrays(numbers, check_units=False, **kw).n_frames == 400
+
+
+@pytest.mark.parametrize(
+    "numbers, unit, match",
+    [
+        (_gauss(1e-8), "nm", r"1e-17 m, below .*positions look like metres declared as nm"),
+        (_gauss(0.01), "nm", r"1e-11 m, below .*positions look like um declared as nm"),
+        (_gauss(0.001), "nm", r"1e-12 m, below .*positions look like um declared as nm"),
+        (_gauss(20.0), "m", r"20 m, above .*positions look like nm or pixels, not metres"),
+        (_gauss(30.0), "um", r"3e-05 m, above .*positions look like nm declared as um"),
+    ],
+)
+def test_unit_slip_examples(numbers, unit, match):
+    from blurtrap.data import from_arrays
+
+    with pytest.raises(ValueError, match=match):
+        from_arrays(numbers, frame_interval=DT, exposure=W, position_unit=unit)
+
+
+def test_position_bounds_are_at_their_stated_values():
+    ok = [2.01e-11, 9.99e-6]
+    for std in ok:
+        Recording(_gauss(std), frame_interval=DT, exposure=W)
+    for std in (1.99e-11, 1.01e-5):
+        with pytest.raises(ValueError, match="positions have standard deviation"):
+            Recording(_gauss(std), frame_interval=DT, exposure=W)
