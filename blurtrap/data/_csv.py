@@ -457,6 +457,11 @@ def load_csv(
             if excluded
             else ""
         )
+        if meta.get("frame_interval_inferred") and str(e).startswith("frame_interval = "):
+            extra += (
+                f" (frame_interval was inferred from the {TIME_COLUMN} column: its time stamps "
+                "look like milliseconds; the column must hold seconds)"
+            )
         raise ValueError(f"{path}: {e}{extra}") from None
     if excluded:
         shown = [ln for ln, _ in excluded][:10]

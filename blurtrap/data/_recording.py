@@ -20,8 +20,21 @@ from ._units import canonical_unit
 #: Default tolerance on time-stamp irregularity, relative to the frame interval.
 DEFAULT_TIMING_TOLERANCE = 1e-3
 # Heuristic unit-slip thresholds (disabled with check_units=False).
-_MAX_PLAUSIBLE_INTERVAL_S = 1.0
+# Frame interval / exposure: trap calibrations are recorded by cameras at ~20 frames/s to
+# ~100 kHz and by photodiodes at ~10 kHz to ~1 MHz, i.e. intervals of 1e-6..5e-2 s. The same
+# numbers in ms read as seconds give 1e-3..50 "s". Intervals of 0.1 s (10 frames/s) or more
+# are therefore taken for ms: this catches every ms slip of a rate up to 10 kHz (e.g. 1500
+# frames/s -> 0.667 "s", which the old 1 s limit let through) and leaves 2x room above the
+# slowest genuine acquisitions (20 frames/s = 0.05 s). A slip of a faster (>= 20 kHz) record
+# gives <= 0.05 "s" and cannot be told from a slow camera by its interval alone; a time
+# column in ms is still caught by the frame_interval check when the stamps disagree with a
+# frame_interval given in seconds.
+_MAX_PLAUSIBLE_INTERVAL_S = 0.1
+# Temperature: liquid water (the medium of these experiments) exists between ~273 K and
+# 373 K; 100 K and 400 K leave a wide margin. Below: Celsius (22 -> 22 K); above: mK
+# (295000) or a typo.
 _MIN_PLAUSIBLE_TEMPERATURE_K = 100.0
+_MAX_PLAUSIBLE_TEMPERATURE_K = 400.0
 _MAX_PLAUSIBLE_LASER_POWER_W = 10.0
 
 # Plausible fluctuation of a trapped bead: the standard deviation of the positions (mean
@@ -106,6 +119,15 @@ def _scalar(name: str, value, unit: str) -> float:
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite [{unit}]; got {name} = {v!r}")
     return v
+
+
+def _in_ms_message(name: str, value: float) -> str:
+    rate = "" if name != "frame_interval" else f", {1e3 / value:.6g} frames/s"
+    return (
+        f"{name} = {value!r} s is at least {_g(_MAX_PLAUSIBLE_INTERVAL_S)} s (10 frames/s or "
+        f"slower): this looks like ms, not s (did you mean {value * 1e-3!r} s{rate}?). Pass "
+        "seconds; if the acquisition really is this slow, pass check_units=False"
+    )
 
 
 def _positions(positions, check_units: bool, declared_unit: str = "m") -> tuple[np.ndarray, str | None]:
@@ -251,10 +273,18 @@ def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: b
         med = float(np.mean(d[h - 1 : h + 1]))
     del d
     if abs(med - frame_interval) > tol * frame_interval:
+        ratio = med / frame_interval
+        hint = (
+            f" (the steps are {_g(ratio)} x frame_interval: the times look like ms)"
+            if abs(ratio / 1e3 - 1) < 0.05
+            else f" (frame_interval is {_g(1 / ratio)} x the steps: frame_interval looks like ms)"
+            if abs(1 / ratio / 1e3 - 1) < 0.05
+            else ""
+        )
         raise ValueError(
             f"times imply a frame interval of {_g(med)} s (median step) but frame_interval = "
             f"{_g(frame_interval)} s; they differ by more than timing_tolerance = {tol:g} "
-            "(relative). Check the units of both (seconds)"
+            f"(relative){hint}. Check the units of both (seconds)"
         )
     # deviation from the least-squares regular grid t0 + i * dt (in place: long records
     # are validated with a few temporaries of their own size)
@@ -298,8 +328,8 @@ class Recording:
     - `name`: optional label.
     - `allow_irregular`: keep irregular time stamps instead of raising; see `timing_jitter`.
     - `timing_tolerance`: relative tolerance for time stamps (default 1e-3).
-    - `check_units`: run the unit-slip heuristics (temperature < 100 K, intervals > 1 s,
-      position std outside 2e-11..1e-5 m, laser power > 10 W). Default True. The position
+    - `check_units`: run the unit-slip heuristics (temperature outside 100..400 K, frame
+      interval or exposure >= 0.1 s, position std outside 2e-11..1e-5 m, laser power > 10 W). Default True. The position
       check names the likely unit, using ``metadata["position_unit"]`` (set by the loaders
       and :func:`from_arrays`) as the declared one.
 
@@ -342,19 +372,13 @@ class Recording:
         dt = _scalar("frame_interval", frame_interval, "s")
         if dt <= 0:
             raise ValueError(f"frame_interval must be > 0 [s]; got frame_interval = {dt!r}")
-        if check_units and dt > _MAX_PLAUSIBLE_INTERVAL_S:
-            raise ValueError(
-                f"frame_interval = {dt!r} s is longer than 1 s: this looks like ms, not s "
-                f"(did you mean {dt * 1e-3!r} s?). Pass seconds, or check_units=False"
-            )
+        if check_units and dt >= _MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(_in_ms_message("frame_interval", dt))
         w = _scalar("exposure", exposure, "s")
         if w <= 0:
             raise ValueError(f"exposure must be > 0 [s]; got exposure = {w!r}")
-        if check_units and w > _MAX_PLAUSIBLE_INTERVAL_S:
-            raise ValueError(
-                f"exposure = {w!r} s is longer than 1 s: this looks like ms, not s "
-                f"(did you mean {w * 1e-3!r} s?). Pass seconds, or check_units=False"
-            )
+        if check_units and w >= _MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(_in_ms_message("exposure", w))
         if w > dt:
             raise ValueError(
                 f"exposure = {w!r} s is longer than frame_interval = {dt!r} s; a frame cannot "
@@ -368,6 +392,18 @@ class Recording:
             raise ValueError(
                 f"temperature = {temp!r} K is below 100 K: this looks like Celsius; pass "
                 f"kelvin (e.g. {temp + 273.15:.2f} K), or check_units=False"
+            )
+        if check_units and temp > _MAX_PLAUSIBLE_TEMPERATURE_K:
+            as_mk = 1e3 * _MIN_PLAUSIBLE_TEMPERATURE_K <= temp <= 1e3 * _MAX_PLAUSIBLE_TEMPERATURE_K
+            hint = (
+                f"this looks like millikelvin (did you mean {temp * 1e-3:.6g} K?)"
+                if as_mk
+                else "no trapping experiment in liquid water runs this hot (water boils at "
+                "373 K)"
+            )
+            raise ValueError(
+                f"temperature = {temp!r} K is above 400 K: {hint}. Expected kelvin between "
+                "100 and 400 K; pass kelvin, or check_units=False"
             )
         if laser_power is None:
             power = None

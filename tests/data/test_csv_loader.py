@@ -268,3 +268,21 @@ def test_metres_in_an_nm_column_are_caught(tmp_path):
     text = "t_s,x_nm\n" + "".join(f"{i * DT!r},{v!r}\n" for i, v in enumerate(x_m.tolist()))
     with pytest.raises(ValueError, match=r"rec.csv: .*positions look like metres declared as nm"):
         load_csv(write(tmp_path, text), exposure=W)
+
+
+@pytest.mark.parametrize("fps", [1000, 1500, 2000, 5000, 10_000])
+def test_time_column_in_ms_is_caught(tmp_path, fps):
+    """t_s written in ms: with the interval inferred from it, and with frame_interval given
+    in seconds; both name the file and the t_s column's unit."""
+    x = np.random.default_rng(1).normal(0, 20.0, 50)
+    text = "t_s,x_nm\n" + "".join(f"{i * 1e3 / fps!r},{v!r}\n" for i, v in enumerate(x.tolist()))
+    p = write(tmp_path, text)
+    with pytest.raises(ValueError, match=r"rec.csv: frame_interval = .* s is at least 0.1 s .*"
+                       r"looks like ms.*inferred from the t_s column: its time stamps look like "
+                       r"milliseconds"):
+        load_csv(p, exposure=1e-4)
+    with pytest.raises(ValueError, match=r"rec.csv: times imply a frame interval of .*"
+                       r"the times look like ms"):
+        load_csv(p, exposure=1e-4, frame_interval=1 / fps)
+    r = load_csv(p, exposure=1e-4, check_units=False)
+    assert r.frame_interval == pytest.approx(1e3 / fps, rel=1e-9)

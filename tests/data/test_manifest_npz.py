@@ -325,3 +325,24 @@ def test_from_arrays_errors(rng, kw, match):
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         from_arrays(args.pop("positions"), **args)
+
+
+def test_ms_and_mk_slips_through_manifest_and_npz(tmp_path):
+    """The unit checks of Recording hold for every loader: a t_s column in ms (1500 frames/s)
+    in a manifest without frame_interval_s, a temperature in mK, and a plain NPZ whose
+    frame_interval is in ms."""
+    csv_ms = "t_s,x_nm\n" + "".join(f"{i / 1.5!r},{(-1) ** i * 3.0}\n" for i in range(20))
+    p = write_manifest(tmp_path, {"position_unit": "nm",
+                                  "recordings": [{"file": "a.csv", "exposure_s": 1e-4}]}, csv_ms)
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: frame_interval = "
+                       r"0.66666.* s is at least 0.1 s .*looks like ms.*t_s column"):
+        load_manifest(p)
+    p = write_manifest(tmp_path, {"position_unit": "nm", "recordings": [entry(temperature_K=295000)]})
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*temperature = 295000.0 K is "
+                       r"above 400 K: this looks like millikelvin"):
+        load_manifest(p)
+    x = np.random.default_rng(2).normal(0, 1e-8, 64)
+    np.savez(tmp_path / "plain.npz", positions=x, frame_interval=np.array(0.6667),
+             exposure=np.array(1e-4))
+    with pytest.raises(ValueError, match=r"plain.npz: frame_interval = 0.6667 s is at least 0.1 s"):
+        load_npz(tmp_path / "plain.npz")

@@ -131,7 +131,7 @@ def test_bad_scalars(rng, kw, match):
 
 def test_exposure_in_ms_hint(rng):
     with pytest.raises(ValueError, match=r"exposure = 2.0 s .*looks like ms.*0.002 s"):
-        make(rng, frame_interval=0.5, exposure=2.0)
+        make(rng, frame_interval=0.05, exposure=2.0)
     # with the heuristics off, genuinely slow acquisitions are allowed
     r = make(rng, frame_interval=5.0, exposure=2.0, check_units=False)
     assert r.exposure == 2.0
@@ -280,3 +280,66 @@ def test_position_bounds_are_at_their_stated_values():
     for std in (1.99e-11, 1.01e-5):
         with pytest.raises(ValueError, match="positions have standard deviation"):
             Recording(_gauss(std), frame_interval=DT, exposure=W)
+
+
+# ---- time in ms, temperature in mK ---------------------------------------------------------------
+RATES = [100, 200, 500, 1000, 1500, 2000, 5000, 10_000]  # frames/s; in ms: 10 .. 0.1 "s"
+
+
+@pytest.mark.parametrize("fps", RATES)
+def test_frame_interval_in_ms_is_caught_for_common_rates(fps):
+    dt_ms = 1e3 / fps
+    with pytest.raises(ValueError, match=rf"frame_interval = {dt_ms!r} s is at least 0.1 s "
+                       rf".*looks like ms.*did you mean {dt_ms * 1e-3!r} s, {fps:g} frames/s"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=dt_ms, exposure=1e-4)
+    with pytest.raises(ValueError, match=rf"exposure = {dt_ms!r} s is at least 0.1 s .*looks like ms"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=0.05, exposure=dt_ms)
+    r = Recording(trace(np.random.default_rng(0)), frame_interval=dt_ms, exposure=1e-4,
+                  check_units=False)
+    assert r.frame_interval == dt_ms
+
+
+@pytest.mark.parametrize("fps", [20, 25, 30, 60, 100, 1500, 1e4, 1e5, 1e6])
+def test_genuine_frame_rates_pass(fps):
+    r = Recording(trace(np.random.default_rng(0)), frame_interval=1 / fps, exposure=0.5 / fps)
+    assert r.sampling_rate == pytest.approx(fps)
+
+
+def test_interval_bound_is_at_0_1_s():
+    x = trace(np.random.default_rng(0))
+    Recording(x, frame_interval=0.0999, exposure=0.05)
+    with pytest.raises(ValueError, match="frame_interval = 0.1 s is at least 0.1 s"):
+        Recording(x, frame_interval=0.1, exposure=0.05)
+
+
+def test_times_in_ms_with_frame_interval_in_s():
+    t_ms = np.arange(200) * (1e3 / 1500)
+    with pytest.raises(ValueError, match=r"times imply a frame interval of 0.666667 s .*"
+                       r"frame_interval = 0.000666667 s.*the times look like ms"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=1 / 1500, exposure=1e-4,
+                  times=t_ms)
+
+
+@pytest.mark.parametrize(
+    "temp, match",
+    [
+        (295_000.0, r"temperature = 295000.0 K is above 400 K: this looks like millikelvin "
+                    r"\(did you mean 295 K\?\)"),
+        (310_150.0, r"looks like millikelvin \(did you mean 310.15 K\?\)"),
+        (1e6, r"temperature = 1000000.0 K is above 400 K: no trapping experiment .*"
+              r"Expected kelvin between 100 and 400 K"),
+        (400.5, r"temperature = 400.5 K is above 400 K"),
+        (5000.0, r"above 400 K: no trapping experiment in liquid water"),
+    ],
+)
+def test_implausibly_hot_temperatures(temp, match):
+    x = trace(np.random.default_rng(0))
+    with pytest.raises(ValueError, match=match):
+        Recording(x, frame_interval=DT, exposure=W, temperature=temp)
+    assert Recording(x, frame_interval=DT, exposure=W, temperature=temp,
+                     check_units=False).temperature == temp
+
+
+@pytest.mark.parametrize("temp", [100.0, 273.15, 295.0, 373.15, 400.0])
+def test_plausible_temperatures_pass(temp):
+    assert make(np.random.default_rng(0), temperature=temp).temperature == temp
