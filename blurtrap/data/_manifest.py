@@ -118,6 +118,12 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
     unknown = sorted(set(doc) - set(_TOP_KEYS))
     if unknown:
         raise ValueError(f"{path}: unknown top-level key(s) {unknown}; allowed: {list(_TOP_KEYS)}")
+    description = doc.get("description")
+    if description is not None and not isinstance(description, str):
+        raise ValueError(
+            f"{path}: 'description' must be a string (or null); got "
+            f"{type(_plain(description)).__name__} {_plain(description)!r:.60}"
+        )
     if "position_unit" not in doc:
         raise ValueError(f'{path}: \'position_unit\' is missing (e.g. "position_unit": "nm")')
     px_given = (

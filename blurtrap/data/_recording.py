@@ -130,23 +130,41 @@ def _in_ms_message(name: str, value: float) -> str:
     )
 
 
-def _positions(positions, check_units: bool, declared_unit: str = "m") -> tuple[np.ndarray, str | None]:
+def numeric_array(values, name: str, unit: str) -> np.ndarray:
+    """``values`` as an integer or float array; text, booleans, complex numbers and objects
+    that are not numbers are a ``ValueError`` naming `name`, never a silent cast."""
     try:
-        arr = np.asarray(positions)
+        arr = np.asarray(values)
     except Exception as e:
-        raise ValueError(f"positions could not be converted to an array: {e}") from None
+        raise ValueError(f"{name} could not be converted to an array: {e}") from None
     kind = arr.dtype.kind
+    flat = arr.reshape(-1)
+    text = kind in "US" or (kind == "O" and any(isinstance(v, (str, bytes)) for v in flat))
+    if text:
+        first = next((v for v in flat if isinstance(v, (str, bytes, np.str_, np.bytes_))), None)
+        raise ValueError(
+            f"{name} must be numeric [{unit}]; got text (an array of dtype {arr.dtype}, e.g. "
+            f"{str(first)[:40]!r}). Convert the values to numbers first (np.asarray(values, "
+            "dtype=float)), or read the file with load_csv, which parses them"
+        )
     if kind == "b":
-        raise ValueError("positions must be numeric [m]; got a boolean array")
+        raise ValueError(f"{name} must be numeric [{unit}]; got a boolean array")
     if kind == "c":
-        raise ValueError("positions must be real [m]; got a complex array")
+        raise ValueError(f"{name} must be real [{unit}]; got a complex array")
     if kind not in "iuf":
         try:
             arr = arr.astype(np.float64)
         except (TypeError, ValueError):
+            bad = next((v for v in flat if not isinstance(v, (int, float, np.number))), None)
             raise ValueError(
-                f"positions must be numeric [m]; got an array of dtype {arr.dtype}"
+                f"{name} must be numeric [{unit}]; got an array of dtype {arr.dtype} holding "
+                f"{type(bad).__name__} {bad!r:.40}"
             ) from None
+    return arr
+
+
+def _positions(positions, check_units: bool, declared_unit: str = "m") -> tuple[np.ndarray, str | None]:
+    arr = numeric_array(positions, "positions", "m")
     if arr.ndim != 1:
         raise ValueError(
             f"positions must be a 1-D array (one trace) [m]; got shape {arr.shape}. "
@@ -237,12 +255,7 @@ def _check_position_scale(std: float, declared: str) -> None:
 
 
 def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: bool):
-    try:
-        t = np.asarray(times)
-    except Exception as e:  # pragma: no cover
-        raise ValueError(f"times could not be converted to an array: {e}") from None
-    if t.dtype.kind not in "iuf":
-        raise ValueError(f"times must be numeric [s]; got dtype {t.dtype}")
+    t = numeric_array(times, "times", "s")
     if t.ndim != 1 or t.shape[0] != n:
         raise ValueError(
             f"times must be a 1-D array with one time stamp per frame ({n}) [s]; "

@@ -286,3 +286,17 @@ def test_time_column_in_ms_is_caught(tmp_path, fps):
         load_csv(p, exposure=1e-4, frame_interval=1 / fps)
     r = load_csv(p, exposure=1e-4, check_units=False)
     assert r.frame_interval == pytest.approx(1e3 / fps, rel=1e-9)
+
+
+@pytest.mark.parametrize("unit", ["m", "mm", "um", "nm"])
+def test_pixel_size_with_a_unit_other_than_px_is_an_error(tmp_path, unit):
+    """pixel_size_m used to be ignored silently for positions not in pixels."""
+    from blurtrap.data import from_arrays
+
+    p = write(tmp_path, good_text(unit=unit))
+    match = rf"pixel_size_m = 1e-07 was given but the positions are in '{unit}', not 'px'"
+    with pytest.raises(ValueError, match=r"rec.csv: " + match):
+        load_csv(p, exposure=W, pixel_size_m=1e-7, check_units=False)
+    with pytest.raises(ValueError, match=match):
+        from_arrays(np.arange(5.0), frame_interval=DT, exposure=W, position_unit=unit,
+                    pixel_size_m=1e-7, check_units=False)

@@ -346,3 +346,47 @@ def test_ms_and_mk_slips_through_manifest_and_npz(tmp_path):
              exposure=np.array(1e-4))
     with pytest.raises(ValueError, match=r"plain.npz: frame_interval = 0.6667 s is at least 0.1 s"):
         load_npz(tmp_path / "plain.npz")
+
+
+@pytest.mark.parametrize("value", [5, 1.5, True, ["a"], {"text": "x"}])
+def test_manifest_description_must_be_text(tmp_path, value):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "description": value,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: 'description' must be a string \(or null\); got "):
+        load_manifest(p)
+    for ok in ("bead A, 1500 fps", None):
+        p = write_manifest(tmp_path, {"position_unit": "nm", "description": ok,
+                                      "recordings": [entry()]})
+        assert len(load_manifest(p)) == 1
+
+
+def test_manifest_pixel_size_without_px_is_an_error(tmp_path):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "pixel_size_m": 1e-7,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: pixel_size_m = 1e-07 was given but the "
+                       r"positions are in 'nm', not 'px'"):
+        load_manifest(p)
+    with pytest.raises(ValueError, match=r"pixel_size_m = 1e-07 was given but .* 'nm', not 'px'"):
+        save_manifest(make_set(np.random.default_rng(0)), tmp_path / "s.json", "nm",
+                      pixel_size_m=1e-7)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"t_s,x_nm\n0,1\n0.001,2\n", r"it looks like text/CSV, starting 't_s,x_nm'\); use load_csv"),
+        ("\ufeffx_um\r\n1\r\n2\r\n".encode(), r"it looks like text/CSV"),
+        (b"0.0,1.5\n" * 2000, r"it looks like text/CSV, starting '0.0,1.5'"),  # > one read
+        ("µa".encode() * 3000, r"it looks like text/CSV"),  # the read ends inside a 'µ'
+        (b"\x89PNG\r\n\x1a\n\x00\x00\x00", r"this is not an NPZ archive .*starts with b'\\x89PNG"),
+        (b"", r"the file is empty"),
+    ],
+)
+def test_text_or_other_files_named_npz(tmp_path, content, match):
+    """np.load used to answer CSV text with a message suggesting allow_pickle."""
+    p = tmp_path / "rec.npz"
+    p.write_bytes(content)
+    for fn in (load_npz, load):
+        with pytest.raises(ValueError, match=r"rec.npz: not a readable .npz file.*" + match) as e:
+            fn(p)
+        assert "pickle" not in str(e.value)

@@ -343,3 +343,42 @@ def test_implausibly_hot_temperatures(temp, match):
 @pytest.mark.parametrize("temp", [100.0, 273.15, 295.0, 373.15, 400.0])
 def test_plausible_temperatures_pass(temp):
     assert make(np.random.default_rng(0), temperature=temp).temperature == temp
+
+
+# ---- text where numbers are expected -------------------------------------------------------------
+TEXT_POSITIONS = [
+    np.array(["1e-9", "2e-9", "-1e-9"]),  # numpy str (would cast silently)
+    ["1e-9", "2e-9", "-1e-9"],  # list of str
+    np.array([b"1e-9", b"2e-9"]),  # bytes
+    [1e-9, "2e-9", 3e-9],  # mixed: numpy makes all of it text
+    np.array([1e-9, "2e-9", 3e-9], dtype=object),  # object array with a str
+    np.array(["a", "b"]),
+]
+
+
+@pytest.mark.parametrize("positions", TEXT_POSITIONS, ids=range(len(TEXT_POSITIONS)))
+def test_text_positions_are_a_clear_error(positions):
+    from blurtrap.data import from_arrays
+
+    match = r"positions must be numeric \[{}\]; got text \(an array of dtype .*\)\. Convert"
+    with pytest.raises(ValueError, match=match.format("m")):
+        Recording(positions, frame_interval=DT, exposure=W)
+    with pytest.raises(ValueError, match=match.format("nm")):
+        from_arrays(positions, frame_interval=DT, exposure=W, position_unit="nm")
+
+
+def test_text_times_are_a_clear_error(rng):
+    with pytest.raises(ValueError, match=r"times must be numeric \[s\]; got text"):
+        make(rng, times=[str(i * DT) for i in range(200)])
+
+
+def test_object_arrays_of_numbers_are_converted_with_the_unit():
+    """An object array of numbers (e.g. Decimal) is converted, and from_arrays applies the
+    unit to it (it used to pass such arrays on without converting nm to m)."""
+    from decimal import Decimal
+
+    from blurtrap.data import from_arrays
+
+    vals = np.array([Decimal("1.5"), Decimal("-2"), Decimal("3")], dtype=object)
+    r = from_arrays(vals, frame_interval=DT, exposure=W, position_unit="nm")
+    np.testing.assert_array_equal(r.positions, [1.5e-9, -2e-9, 3e-9])
