@@ -59,15 +59,26 @@ _UNIT_WORDS = {"m": "metres", "mm": "mm", "um": "um", "nm": "nm", "px": "px"}
 
 
 class TimingJitter(NamedTuple):
-    """Deviation of the time stamps from the best-fitting regular grid ``t0 + i * dt``.
+    """Irregularity of the time stamps ``t``.
 
-    **Fields:** ``std`` [s] and ``max_deviation`` [s] (largest absolute deviation), and
-    ``fitted_interval`` [s] (the slope ``dt`` of that grid).
+    **Fields** (all [s]):
+
+    - ``std``: the per-interval jitter, the standard deviation of the frame intervals
+      ``t[i+1] - t[i]``. If each stamp has an independent error of std sigma (e.g.
+      ``blurtrap.simulate.TimingJitter(sigma)``) this is ``sqrt(2) * sigma``; if the intervals
+      vary independently (a clock that wanders) it is their std.
+    - ``max_deviation``: the largest absolute deviation of ``t`` from the best-fitting
+      regular grid ``t0 + i * dt`` (what ``timing_tolerance`` is compared with).
+    - ``fitted_interval``: the slope ``dt`` of that grid.
+    - ``grid_std``: the standard deviation of the deviations from that grid. For a wandering
+      clock it is the accumulated wander and grows with the record length, so it can be far
+      larger than ``std`` (it was reported as ``std`` before).
     """
 
     std: float
     max_deviation: float
     fitted_interval: float
+    grid_std: float | None = None
 
 
 def _g(x) -> str:
@@ -277,6 +288,7 @@ def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: b
             f"times[{i - 1}] = {float(t[i - 1])!r} s ({nonincr.size} non-increasing step(s) in all)"
         )
     d_max, d_min = float(d.max()), float(d.min())
+    interval_std = float(np.std(d))
     h = d.size // 2  # np.median(d) without another copy (d is a temporary)
     if d.size % 2:
         d.partition(h)
@@ -309,15 +321,17 @@ def _timing(times, n: int, frame_interval: float, tol: float, allow_irregular: b
     resid -= ic
     del ic
     max_dev = max(float(resid.max()), -float(resid.min()))
-    jitter = TimingJitter(float(np.std(resid)), max_dev, slope)
+    jitter = TimingJitter(interval_std, max_dev, slope, float(np.std(resid)))
     if jitter.max_deviation > tol * frame_interval and not allow_irregular:
         k = int(np.argmax(np.abs(resid)))
         raise ValueError(
-            f"times are irregular: deviation from a regular grid has std {_g(jitter.std)} s "
-            f"and max {_g(jitter.max_deviation)} s (at times[{k}] = {float(t[k])!r}), i.e. "
-            f"{_g(jitter.max_deviation / frame_interval)} frame intervals > timing_tolerance "
-            f"= {tol:g}. Largest step {_g(d_max)} s, smallest {_g(d_min)} s (dropped "
-            "frames?). Pass allow_irregular=True to keep them (reported in timing_jitter)"
+            f"times are irregular: per-interval jitter (std of the frame intervals) "
+            f"std {_g(jitter.std)} s and max deviation from the best regular grid "
+            f"{_g(jitter.max_deviation)} s (at times[{k}] = {float(t[k])!r}; grid deviation "
+            f"std {_g(jitter.grid_std)} s), i.e. {_g(jitter.max_deviation / frame_interval)} "
+            f"frame intervals > timing_tolerance = {tol:g}. Largest step {_g(d_max)} s, "
+            f"smallest {_g(d_min)} s (dropped frames?). Pass allow_irregular=True (a manifest "
+            "key too) to keep them (reported in timing_jitter)"
         )
     return t, jitter
 

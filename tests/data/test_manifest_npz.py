@@ -390,3 +390,48 @@ def test_text_or_other_files_named_npz(tmp_path, content, match):
         with pytest.raises(ValueError, match=r"rec.npz: not a readable .npz file.*" + match) as e:
             fn(p)
         assert "pickle" not in str(e.value)
+
+
+def _irregular_csv(n=400, seed=15):
+    rng = np.random.default_rng(seed)
+    t = np.concatenate([[0.0], np.cumsum(1e-3 + rng.normal(0, 2e-5, n - 1))])
+    x = rng.normal(0, 20.0, n)
+    return t, "t_s,x_nm\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t.tolist(), x.tolist(), strict=True))
+
+
+@pytest.mark.parametrize(
+    "top, per_entry, kept",
+    [
+        (None, None, False),
+        (None, True, True),
+        (True, None, True),
+        (False, True, True),
+        (True, False, False),  # the entry's own setting wins
+    ],
+)
+def test_manifest_allow_irregular_per_entry_and_default(tmp_path, top, per_entry, kept):
+    t, text = _irregular_csv()
+    e = {"file": "a.csv", "exposure_s": 1e-4}  # frame interval inferred from the stamps
+    if per_entry is not None:
+        e["allow_irregular"] = per_entry
+    doc = {"position_unit": "nm", "recordings": [e]}
+    if top is not None:
+        doc["allow_irregular"] = top
+    p = write_manifest(tmp_path, doc, text)
+    if not kept:
+        with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: times are "
+                           r"irregular: .*allow_irregular=True \(a manifest key too\)"):
+            load_manifest(p)
+        return
+    (r,) = load_manifest(p)
+    assert r.allow_irregular and not r.is_regular
+    assert r.timing_jitter.std == pytest.approx(float(np.std(np.diff(t))), rel=1e-9)
+    assert r.timing_jitter.std == pytest.approx(2e-5, rel=0.1)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None, [True]])
+def test_manifest_allow_irregular_default_must_be_boolean(tmp_path, value):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "allow_irregular": value,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: allow_irregular must be true or false"):
+        load_manifest(p)

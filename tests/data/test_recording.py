@@ -382,3 +382,46 @@ def test_object_arrays_of_numbers_are_converted_with_the_unit():
     vals = np.array([Decimal("1.5"), Decimal("-2"), Decimal("3")], dtype=object)
     r = from_arrays(vals, frame_interval=DT, exposure=W, position_unit="nm")
     np.testing.assert_array_equal(r.positions, [1.5e-9, -2e-9, 3e-9])
+
+
+# ---- timing jitter: per-interval, not the accumulated clock wander ------------------------------
+def test_jitter_of_a_wandering_clock_is_the_per_interval_std():
+    """Intervals dt + e_i with independent e_i of std 33 us (the clock wanders): the reported
+    jitter std is ~33 us, while the deviation from the best regular grid (grid_std) is the
+    accumulated wander, tens of times larger."""
+    rng = np.random.default_rng(12)
+    n, dt, s = 90_000, 1 / 1500, 33e-6
+    t = np.concatenate([[0.0], np.cumsum(dt + rng.normal(0, s, n - 1))])
+    r = Recording(rng.normal(0, 1e-8, n), frame_interval=dt, exposure=1e-4, times=t,
+                  allow_irregular=True)
+    j = r.timing_jitter
+    assert j.std == pytest.approx(s, rel=0.02)
+    assert j.std == pytest.approx(float(np.std(np.diff(t))), rel=1e-12)
+    assert j.grid_std > 20 * j.std and j.max_deviation > j.grid_std
+    assert j.fitted_interval == pytest.approx(dt, rel=1e-3)
+
+
+def test_jitter_of_independent_stamp_errors():
+    """t_i = i dt + delta_i, delta_i independent with std sigma: std = sqrt(2) sigma (the
+    intervals' std) and grid_std = sigma."""
+    rng = np.random.default_rng(13)
+    n, dt, sigma = 50_000, 1e-3, 2e-5
+    t = np.arange(n) * dt + rng.normal(0, sigma, n)
+    j = Recording(rng.normal(0, 1e-8, n), frame_interval=dt, exposure=1e-4, times=t,
+                  allow_irregular=True).timing_jitter
+    assert j.std == pytest.approx(np.sqrt(2) * sigma, rel=0.02)
+    assert j.grid_std == pytest.approx(sigma, rel=0.02)
+
+
+def test_irregular_error_reports_both_jitters():
+    rng = np.random.default_rng(14)
+    t = np.concatenate([[0.0], np.cumsum(DT + rng.normal(0, 1e-5, 999))])
+    with pytest.raises(ValueError, match=r"per-interval jitter \(std of the frame intervals\) std "
+                       r"\S+e-0[56] s and max deviation .* grid deviation std .* s\).*"
+                       r"allow_irregular=True"):
+        Recording(trace(rng, 1000), frame_interval=DT, exposure=W, times=t)
+
+
+def test_timing_jitter_positional_construction_still_works():
+    j = TimingJitter(1e-5, 2e-5, 1e-3)
+    assert (j.std, j.max_deviation, j.fitted_interval, j.grid_std) == (1e-5, 2e-5, 1e-3, None)
