@@ -136,8 +136,9 @@ def _in_ms_message(name: str, value: float) -> str:
     rate = "" if name != "frame_interval" else f", {1e3 / value:.6g} frames/s"
     return (
         f"{name} = {value!r} s is at least {_g(_MAX_PLAUSIBLE_INTERVAL_S)} s (10 frames/s or "
-        f"slower): this looks like ms, not s (did you mean {value * 1e-3!r} s{rate}?). Pass "
-        "seconds; if the acquisition really is this slow, pass check_units=False"
+        f"slower): this looks like ms, not s (did you mean {value * 1e-3!r} s{rate}?). "
+        f"Expected seconds, below {_g(_MAX_PLAUSIBLE_INTERVAL_S)} s; if the acquisition really "
+        "is this slow, pass check_units=False"
     )
 
 
