@@ -52,3 +52,33 @@ def test_public_names():
         "from_arrays",
     ]:
         assert hasattr(blurtrap.data, name)
+
+
+def test_using_the_loaders_imports_no_jax(tmp_path):
+    """Not only the import: building, saving and loading recordings in every format stays
+    numpy only (a fresh interpreter, so that no other test's jax import is seen)."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys, numpy as np
+from pathlib import Path
+import blurtrap as bt
+from blurtrap.data import from_arrays, load, load_csv, save_manifest, save_npz
+tmp = Path({str(tmp_path)!r})
+x = np.random.default_rng(0).normal(0, 20.0, (2, 300))
+s = from_arrays(x, frame_interval=1e-3, exposure=1e-4, position_unit="nm", times=np.arange(300) * 1e-3)
+save_npz(s, tmp / "s.npz"); save_manifest(s, tmp / "m.json")
+assert load(tmp / "s.npz") == s and len(load(tmp / "m.json")) == 2
+assert load_csv(next(tmp.glob("*.csv")), exposure=1e-4).n_frames == 300
+bt.Recording(x[0] * 1e-9, frame_interval=1e-3, exposure=1e-4)
+try:
+    bt.Recording(x[0], frame_interval=1e-3, exposure=1e-4)
+except ValueError:
+    pass
+bad = sorted(m for m in sys.modules if m.split(".")[0] in {sorted(FORBIDDEN_TOP)!r})
+print(bad)
+sys.exit(1 if bad else 0)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
