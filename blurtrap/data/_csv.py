@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
 from ._units import (
     ALLOWED_UNITS,
@@ -457,6 +457,11 @@ def load_csv(
             if excluded
             else ""
         )
+        if meta.get("frame_interval_inferred") and str(e).startswith("frame_interval = "):
+            extra += (
+                f" (frame_interval was inferred from the {TIME_COLUMN} column: its time stamps "
+                "look like milliseconds; the column must hold seconds)"
+            )
         raise ValueError(f"{path}: {e}{extra}") from None
     if excluded:
         shown = [ln for ln, _ in excluded][:10]

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
-from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
+from .._constants import DEFAULT_TEMPERATURE
+from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, numeric_array
 from ._recording_set import RecordingSet
 from ._units import canonical_unit, check_pixel_size, to_metres
 
@@ -60,21 +60,18 @@ def from_arrays(
     """
     unit = canonical_unit(position_unit)
     px = check_pixel_size(unit, pixel_size_m)
-    try:
-        raw = np.asarray(positions)
-    except Exception as e:
-        raise ValueError(f"positions could not be converted to an array: {e}") from None
+    raw = numeric_array(positions, "positions", position_unit)
     if raw.ndim not in (1, 2):
         raise ValueError(
             f"positions must be 1-D (one recording) or 2-D (rows = recordings); got shape "
             f"{raw.shape}"
         )
     meta = {} if metadata is None else dict(metadata)
-    if raw.dtype.kind in "iuf" and raw.dtype != np.float64:
+    if raw.dtype != np.float64:
         meta.setdefault("input_dtype", raw.dtype.name)
     if unit != "m":
         meta["position_unit"] = unit
-    pos = to_metres(raw, unit, px) if raw.dtype.kind in "iuf" else raw
+    pos = to_metres(raw, unit, px)
 
     def power(p):
         if p is None:

@@ -17,13 +17,13 @@ import re
 from decimal import Decimal
 from pathlib import Path
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._csv import load_csv, write_csv
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
 from ._recording_set import RecordingSet
 from ._units import canonical_unit, check_pixel_size, decimal_text
 
-_TOP_KEYS = ("position_unit", "pixel_size_m", "recordings", "description")
+_TOP_KEYS = ("position_unit", "pixel_size_m", "recordings", "description", "allow_irregular")
 _ENTRY_KEYS = (
     "file",
     "frame_interval_s",
@@ -84,9 +84,11 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
     Entry keys: ``file`` and ``exposure_s`` (required), ``frame_interval_s`` (else inferred
     from the CSV time stamps), ``temperature_K`` (else 295 K, noted in
     ``metadata["defaults_applied"]``), ``laser_power_mW``, ``name`` (default: file stem),
-    ``metadata``, ``allow_irregular``, ``timing_tolerance``, ``check_units``. Top level:
-    ``position_unit`` (required), ``pixel_size_m`` (for ``px``), ``recordings``,
-    ``description``. Unknown keys are errors (so ``exposure_ms`` cannot be ignored).
+    ``metadata``, ``allow_irregular`` (keep irregular time stamps; their jitter is reported
+    in ``timing_jitter``), ``timing_tolerance``, ``check_units``. Top level:
+    ``position_unit`` (required), ``pixel_size_m`` (for ``px`` only), ``recordings``,
+    ``description`` (a string), ``allow_irregular`` (the default for entries that do not
+    set it). Unknown keys are errors (so ``exposure_ms`` cannot be ignored).
 
     **Raises:** ``ValueError`` naming the manifest, the entry and the problem;
     ``FileNotFoundError`` for a missing CSV.
@@ -118,6 +120,12 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
     unknown = sorted(set(doc) - set(_TOP_KEYS))
     if unknown:
         raise ValueError(f"{path}: unknown top-level key(s) {unknown}; allowed: {list(_TOP_KEYS)}")
+    description = doc.get("description")
+    if description is not None and not isinstance(description, str):
+        raise ValueError(
+            f"{path}: 'description' must be a string (or null); got "
+            f"{type(_plain(description)).__name__} {_plain(description)!r:.60}"
+        )
     if "position_unit" not in doc:
         raise ValueError(f'{path}: \'position_unit\' is missing (e.g. "position_unit": "nm")')
     px_given = (
@@ -128,6 +136,8 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         px = check_pixel_size(unit, px_given)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
+    # manifest-level default for the entries that do not set it themselves
+    irregular_default = _flag(str(path), "allow_irregular", doc.get("allow_irregular", False))
     entries = doc.get("recordings")
     if not isinstance(entries, list) or not entries:
         raise ValueError(f"{path}: 'recordings' must be a non-empty list of entries")
@@ -174,7 +184,9 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         if defaults:
             meta["defaults_applied"] = defaults
         name = e.get("name", Path(e["file"]).stem)
-        kw["allow_irregular"] = _flag(where, "allow_irregular", e.get("allow_irregular", False))
+        kw["allow_irregular"] = _flag(
+            where, "allow_irregular", e.get("allow_irregular", irregular_default)
+        )
         kw["check_units"] = _flag(where, "check_units", e.get("check_units", True))
         kw["timing_tolerance"] = _number(
             where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))

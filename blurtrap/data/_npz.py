@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics._constants import DEFAULT_TEMPERATURE
+from .._constants import DEFAULT_TEMPERATURE
 from ._recording import Recording, thaw
 from ._recording_set import RecordingSet
 
@@ -78,6 +78,7 @@ def load_npz(
     names in the file, else from the keywords.
     """
     path = Path(os.fspath(path))
+    _check_npz_signature(path)
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy array
@@ -94,6 +95,49 @@ def load_npz(
         return _from_plain(data, frame_interval, exposure, temperature, laser_power)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
+
+
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip archive (NPZ); empty zip
+_NPY_MAGIC = b"\x93NUMPY"  # a bare .npy array (reported by np.load's reader below)
+
+
+def _looks_like_text(head: bytes) -> bool:
+    if b"\x00" in head:
+        return False
+    for cut in range(4):  # the block may end inside a multi-byte UTF-8 character
+        try:
+            head[: len(head) - cut].decode("utf-8")
+            return True
+        except UnicodeDecodeError:
+            continue
+    return False
+
+
+def _check_npz_signature(path: Path) -> None:
+    """Refuse, with a clear message, a file that is not a zip archive (np.load would try to
+    unpickle it and suggest allow_pickle=True, which is never the answer here)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except FileNotFoundError:
+        raise
+    except OSError as e:
+        raise ValueError(f"{path}: not a readable .npz file ({e})") from None
+    if head.startswith(_ZIP_MAGIC) or head.startswith(_NPY_MAGIC):
+        return
+    if not head:
+        raise ValueError(f"{path}: not a readable .npz file (the file is empty)")
+    if _looks_like_text(head):
+        first = head.split(b"\n", 1)[0][:60].decode("utf-8", errors="replace")
+        raise ValueError(
+            f"{path}: not a readable .npz file: this is not an NPZ archive (it looks like "
+            f"text/CSV, starting {first!r}); use load_csv, or a .csv name so that load() "
+            "reads it as CSV"
+        )
+    raise ValueError(
+        f"{path}: not a readable .npz file: this is not an NPZ archive (a zip file as written "
+        f"by save_npz or numpy.savez); it starts with {head[:8]!r}"
+    )
 
 
 _ENTRY_KEYS = ("frame_interval", "exposure", "temperature", "laser_power", "name", "metadata",

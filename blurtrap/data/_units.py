@@ -41,7 +41,13 @@ def check_pixel_size(unit: str, pixel_size_m, *, where: str = "") -> float | Non
     """Validate ``pixel_size_m`` for ``unit`` and return it as float (None if unused)."""
     pre = f"{where}: " if where else ""
     if unit != "px":
-        return None if pixel_size_m is None else _positive_scalar(pixel_size_m, pre)
+        if pixel_size_m is None:
+            return None
+        raise ValueError(
+            f"{pre}pixel_size_m = {pixel_size_m!r} was given but the positions are in "
+            f"{unit!r}, not 'px'; pixel_size_m only converts positions in pixels (it would be "
+            "ignored): remove it, or declare the positions in 'px'"
+        )
     if pixel_size_m is None:
         raise ValueError(
             f"{pre}position unit 'px' needs pixel_size_m (the pixel size in metres, e.g. 1e-7)"

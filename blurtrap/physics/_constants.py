@@ -1,4 +1,4 @@
-"""Physical constants (SI)."""
+"""Physical constants (SI), defined once in the pure-Python ``blurtrap._constants``."""
 
-BOLTZMANN = 1.380649e-23  # J/K, exact (SI 2019)
-DEFAULT_TEMPERATURE = 295.0  # K
+from .._constants import BOLTZMANN as BOLTZMANN
+from .._constants import DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE

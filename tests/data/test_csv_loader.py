@@ -69,7 +69,8 @@ def test_unit_in_header_must_match_requested(tmp_path):
         ValueError, match=r"rec.csv, line 1: column 'x_um' is in 'um' but position_unit = 'nm'"
     ):
         load_csv(p, exposure=W, position_unit="nm")
-    assert load_csv(p, exposure=W, position_unit="µm").n_frames == 20
+    # (values 1.5..30 um: a 20 um std is no trapped bead, so the unit check is off here)
+    assert load_csv(p, exposure=W, position_unit="µm", check_units=False).n_frames == 20
 
 
 def test_unknown_unit_lists_allowed(tmp_path):
@@ -245,3 +246,57 @@ def test_load_dispatches_csv(tmp_path):
     assert r.n_frames == 20
     with pytest.raises(ValueError, match=r"unknown file type '.txt'; expected one of"):
         load(tmp_path / "x.txt")
+
+
+@pytest.mark.parametrize("true_nm", [0.64, 2.0, 10.0])
+def test_um_values_in_an_nm_column_are_caught(tmp_path, true_nm):
+    """A trace with std 0.64-10 nm written in um under an x_nm header reads as 6.4e-13 ..
+    1e-11 m: an error naming the file and the slip; check_units=False keeps it."""
+    x_um = np.random.default_rng(3).normal(0, true_nm * 1e-3, 200)
+    text = "t_s,x_nm\n" + "".join(f"{i * DT!r},{v!r}\n" for i, v in enumerate(x_um.tolist()))
+    p = write(tmp_path, text)
+    with pytest.raises(
+        ValueError, match=r"rec.csv: positions have standard deviation .* m, below .*"
+        r"positions look like um declared as nm.*position_unit='um' or a column x_um"
+    ):
+        load_csv(p, exposure=W)
+    assert load_csv(p, exposure=W, check_units=False).n_frames == 200
+
+
+def test_metres_in_an_nm_column_are_caught(tmp_path):
+    x_m = np.random.default_rng(4).normal(0, 2e-8, 200)
+    text = "t_s,x_nm\n" + "".join(f"{i * DT!r},{v!r}\n" for i, v in enumerate(x_m.tolist()))
+    with pytest.raises(ValueError, match=r"rec.csv: .*positions look like metres declared as nm"):
+        load_csv(write(tmp_path, text), exposure=W)
+
+
+@pytest.mark.parametrize("fps", [1000, 1500, 2000, 5000, 10_000])
+def test_time_column_in_ms_is_caught(tmp_path, fps):
+    """t_s written in ms: with the interval inferred from it, and with frame_interval given
+    in seconds; both name the file and the t_s column's unit."""
+    x = np.random.default_rng(1).normal(0, 20.0, 50)
+    text = "t_s,x_nm\n" + "".join(f"{i * 1e3 / fps!r},{v!r}\n" for i, v in enumerate(x.tolist()))
+    p = write(tmp_path, text)
+    with pytest.raises(ValueError, match=r"rec.csv: frame_interval = .* s is at least 0.1 s .*"
+                       r"looks like ms.*inferred from the t_s column: its time stamps look like "
+                       r"milliseconds"):
+        load_csv(p, exposure=1e-4)
+    with pytest.raises(ValueError, match=r"rec.csv: times imply a frame interval of .*"
+                       r"the times look like ms"):
+        load_csv(p, exposure=1e-4, frame_interval=1 / fps)
+    r = load_csv(p, exposure=1e-4, check_units=False)
+    assert r.frame_interval == pytest.approx(1e3 / fps, rel=1e-9)
+
+
+@pytest.mark.parametrize("unit", ["m", "mm", "um", "nm"])
+def test_pixel_size_with_a_unit_other_than_px_is_an_error(tmp_path, unit):
+    """pixel_size_m used to be ignored silently for positions not in pixels."""
+    from blurtrap.data import from_arrays
+
+    p = write(tmp_path, good_text(unit=unit))
+    match = rf"pixel_size_m = 1e-07 was given but the positions are in '{unit}', not 'px'"
+    with pytest.raises(ValueError, match=r"rec.csv: " + match):
+        load_csv(p, exposure=W, pixel_size_m=1e-7, check_units=False)
+    with pytest.raises(ValueError, match=match):
+        from_arrays(np.arange(5.0), frame_interval=DT, exposure=W, position_unit=unit,
+                    pixel_size_m=1e-7, check_units=False)

@@ -186,6 +186,25 @@ def test_manifest_errors(tmp_path, doc, match):
         load_manifest(write_manifest(tmp_path, doc))
 
 
+@pytest.mark.parametrize(
+    "csv_text, match",
+    [
+        ("t_s,x_nm\n0,0.001\n0.001,0.002\n0.002,-0.001\n", r"um declared as nm"),
+        ("t_s,x_nm\n0,1e-9\n0.001,2e-9\n0.002,-1e-9\n", r"metres declared as nm"),
+        ("t_s,x_um\n0,10\n0.001,20\n0.002,-10\n", r"nm declared as um"),
+    ],
+)
+def test_manifest_position_unit_slips(tmp_path, csv_text, match):
+    unit = csv_text.split(",x_")[1].split("\n")[0]
+    p = write_manifest(tmp_path, {"position_unit": unit, "recordings": [entry()]}, csv_text)
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: positions have "
+                       r"standard deviation .*positions look like " + match):
+        load_manifest(p)
+    p = write_manifest(tmp_path, {"position_unit": unit,
+                                  "recordings": [entry(check_units=False)]}, csv_text)
+    assert load_manifest(p)[0].n_frames == 3
+
+
 def test_manifest_row_error_names_manifest_csv_and_line(tmp_path):
     p = write_manifest(
         tmp_path, {"position_unit": "nm", "recordings": [entry()]}, "t_s,x_nm\n0,1\n0.001,x\n"
@@ -306,3 +325,113 @@ def test_from_arrays_errors(rng, kw, match):
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         from_arrays(args.pop("positions"), **args)
+
+
+def test_ms_and_mk_slips_through_manifest_and_npz(tmp_path):
+    """The unit checks of Recording hold for every loader: a t_s column in ms (1500 frames/s)
+    in a manifest without frame_interval_s, a temperature in mK, and a plain NPZ whose
+    frame_interval is in ms."""
+    csv_ms = "t_s,x_nm\n" + "".join(f"{i / 1.5!r},{(-1) ** i * 3.0}\n" for i in range(20))
+    p = write_manifest(tmp_path, {"position_unit": "nm",
+                                  "recordings": [{"file": "a.csv", "exposure_s": 1e-4}]}, csv_ms)
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: frame_interval = "
+                       r"0.66666.* s is at least 0.1 s .*looks like ms.*t_s column"):
+        load_manifest(p)
+    p = write_manifest(tmp_path, {"position_unit": "nm", "recordings": [entry(temperature_K=295000)]})
+    with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*temperature = 295000.0 K is "
+                       r"above 400 K: this looks like millikelvin"):
+        load_manifest(p)
+    x = np.random.default_rng(2).normal(0, 1e-8, 64)
+    np.savez(tmp_path / "plain.npz", positions=x, frame_interval=np.array(0.6667),
+             exposure=np.array(1e-4))
+    with pytest.raises(ValueError, match=r"plain.npz: frame_interval = 0.6667 s is at least 0.1 s"):
+        load_npz(tmp_path / "plain.npz")
+
+
+@pytest.mark.parametrize("value", [5, 1.5, True, ["a"], {"text": "x"}])
+def test_manifest_description_must_be_text(tmp_path, value):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "description": value,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: 'description' must be a string \(or null\); got "):
+        load_manifest(p)
+    for ok in ("bead A, 1500 fps", None):
+        p = write_manifest(tmp_path, {"position_unit": "nm", "description": ok,
+                                      "recordings": [entry()]})
+        assert len(load_manifest(p)) == 1
+
+
+def test_manifest_pixel_size_without_px_is_an_error(tmp_path):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "pixel_size_m": 1e-7,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: pixel_size_m = 1e-07 was given but the "
+                       r"positions are in 'nm', not 'px'"):
+        load_manifest(p)
+    with pytest.raises(ValueError, match=r"pixel_size_m = 1e-07 was given but .* 'nm', not 'px'"):
+        save_manifest(make_set(np.random.default_rng(0)), tmp_path / "s.json", "nm",
+                      pixel_size_m=1e-7)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"t_s,x_nm\n0,1\n0.001,2\n", r"it looks like text/CSV, starting 't_s,x_nm'\); use load_csv"),
+        ("\ufeffx_um\r\n1\r\n2\r\n".encode(), r"it looks like text/CSV"),
+        (b"0.0,1.5\n" * 2000, r"it looks like text/CSV, starting '0.0,1.5'"),  # > one read
+        ("µa".encode() * 3000, r"it looks like text/CSV"),  # the read ends inside a 'µ'
+        (b"\x89PNG\r\n\x1a\n\x00\x00\x00", r"this is not an NPZ archive .*starts with b'\\x89PNG"),
+        (b"", r"the file is empty"),
+    ],
+)
+def test_text_or_other_files_named_npz(tmp_path, content, match):
+    """np.load used to answer CSV text with a message suggesting allow_pickle."""
+    p = tmp_path / "rec.npz"
+    p.write_bytes(content)
+    for fn in (load_npz, load):
+        with pytest.raises(ValueError, match=r"rec.npz: not a readable .npz file.*" + match) as e:
+            fn(p)
+        assert "pickle" not in str(e.value)
+
+
+def _irregular_csv(n=400, seed=15):
+    rng = np.random.default_rng(seed)
+    t = np.concatenate([[0.0], np.cumsum(1e-3 + rng.normal(0, 2e-5, n - 1))])
+    x = rng.normal(0, 20.0, n)
+    return t, "t_s,x_nm\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t.tolist(), x.tolist(), strict=True))
+
+
+@pytest.mark.parametrize(
+    "top, per_entry, kept",
+    [
+        (None, None, False),
+        (None, True, True),
+        (True, None, True),
+        (False, True, True),
+        (True, False, False),  # the entry's own setting wins
+    ],
+)
+def test_manifest_allow_irregular_per_entry_and_default(tmp_path, top, per_entry, kept):
+    t, text = _irregular_csv()
+    e = {"file": "a.csv", "exposure_s": 1e-4}  # frame interval inferred from the stamps
+    if per_entry is not None:
+        e["allow_irregular"] = per_entry
+    doc = {"position_unit": "nm", "recordings": [e]}
+    if top is not None:
+        doc["allow_irregular"] = top
+    p = write_manifest(tmp_path, doc, text)
+    if not kept:
+        with pytest.raises(ValueError, match=r"m.json, recordings\[0\]: .*a.csv: times are "
+                           r"irregular: .*allow_irregular=True \(a manifest key too\)"):
+            load_manifest(p)
+        return
+    (r,) = load_manifest(p)
+    assert r.allow_irregular and not r.is_regular
+    assert r.timing_jitter.std == pytest.approx(float(np.std(np.diff(t))), rel=1e-9)
+    assert r.timing_jitter.std == pytest.approx(2e-5, rel=0.1)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None, [True]])
+def test_manifest_allow_irregular_default_must_be_boolean(tmp_path, value):
+    p = write_manifest(tmp_path, {"position_unit": "nm", "allow_irregular": value,
+                                  "recordings": [entry()]})
+    with pytest.raises(ValueError, match=r"m.json: allow_irregular must be true or false"):
+        load_manifest(p)

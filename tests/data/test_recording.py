@@ -131,7 +131,7 @@ def test_bad_scalars(rng, kw, match):
 
 def test_exposure_in_ms_hint(rng):
     with pytest.raises(ValueError, match=r"exposure = 2.0 s .*looks like ms.*0.002 s"):
-        make(rng, frame_interval=0.5, exposure=2.0)
+        make(rng, frame_interval=0.05, exposure=2.0)
     # with the heuristics off, genuinely slow acquisitions are allowed
     r = make(rng, frame_interval=5.0, exposure=2.0, check_units=False)
     assert r.exposure == 2.0
@@ -200,3 +200,228 @@ def test_accepts_jax_arrays(rng):
     r = Recording(jnp.asarray(x), frame_interval=jnp.asarray(DT), exposure=W)
     np.testing.assert_array_equal(r.positions, x)
     assert isinstance(r.positions, np.ndarray)
+
+
+# ---- unit slips in the position scale (both directions) ----------------------------------------
+KT = 1.380649e-23 * 295.0
+SCALE = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
+WORD = {"m": "metres", "mm": "mm", "um": "um", "nm": "nm"}
+
+
+def _gauss(std, n=400):
+    x = np.random.default_rng(7).standard_normal(n)
+    return x / x.std() * std
+
+
+@pytest.mark.parametrize("k", [1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2])
+@pytest.mark.parametrize("blur", [1.0, 1e-3])
+@pytest.mark.parametrize("unit", ["m", "um", "nm"])
+def test_every_physical_trap_passes_the_scale_check(k, blur, unit):
+    """Thermal std sqrt(kT/k) from very soft (1e-7 N/m) to very stiff (1e-2 N/m) traps, with
+    the variance blurred down up to 1000-fold, declared in the right unit: accepted."""
+    from blurtrap.data import from_arrays
+
+    std = np.sqrt(KT / k * blur)
+    r = from_arrays(_gauss(std) / SCALE[unit], frame_interval=DT, exposure=W, position_unit=unit)
+    assert r.positions.std() == pytest.approx(std, rel=1e-9)
+
+
+SLIPS = [(true, declared) for true in SCALE for declared in SCALE if true != declared]
+
+
+@pytest.mark.parametrize("true_unit, declared", SLIPS, ids=[f"{t}-as-{d}" for t, d in SLIPS])
+@pytest.mark.parametrize("true_std", [0.64e-9, 1e-8, 2e-7])
+def test_unit_slips_of_a_physical_trace_are_caught_and_named(true_unit, declared, true_std):
+    """The numbers of a real trace (std 0.64 nm .. 200 nm) written in one unit and declared
+    in another: whenever the result is outside any trapped bead's range it is an error that
+    names the slip (for a typical 10 nm trace, the exact units), else it passes; with
+    check_units=False it is always accepted."""
+    from blurtrap.data import from_arrays
+
+    numbers = _gauss(true_std) / SCALE[true_unit]
+    seen = true_std * SCALE[declared] / SCALE[true_unit]  # the std the loader sees [m]
+    kw = dict(frame_interval=DT, exposure=W, position_unit=declared)
+    if 2e-11 <= seen <= 1e-5:
+        from_arrays(numbers, **kw)
+        return
+    with pytest.raises(ValueError, match=r"positions have standard deviation .* m, (below|above)") as e:
+        from_arrays(numbers, **kw)
+    msg = str(e.value)
+    assert "check_units=False" in msg and f"declared unit {declared!r}" in msg
+    if true_std == 1e-8:
+        if declared == "m" and seen > 1e-5:
+            assert f"positions look like {WORD[true_unit]} or pixels, not metres" in msg
+        else:
+            assert f"positions look like {WORD[true_unit]} declared as {WORD[declared]}" in msg
+    assert from_arrays(numbers, check_units=False, **kw).n_frames == 400
+
+
+@pytest.mark.parametrize(
+    "numbers, unit, match",
+    [
+        (_gauss(1e-8), "nm", r"1e-17 m, below .*positions look like metres declared as nm"),
+        (_gauss(0.01), "nm", r"1e-11 m, below .*positions look like um declared as nm"),
+        (_gauss(0.001), "nm", r"1e-12 m, below .*positions look like um declared as nm"),
+        (_gauss(20.0), "m", r"20 m, above .*positions look like nm or pixels, not metres"),
+        (_gauss(30.0), "um", r"3e-05 m, above .*positions look like nm declared as um"),
+    ],
+)
+def test_unit_slip_examples(numbers, unit, match):
+    from blurtrap.data import from_arrays
+
+    with pytest.raises(ValueError, match=match):
+        from_arrays(numbers, frame_interval=DT, exposure=W, position_unit=unit)
+
+
+def test_position_bounds_are_at_their_stated_values():
+    ok = [2.01e-11, 9.99e-6]
+    for std in ok:
+        Recording(_gauss(std), frame_interval=DT, exposure=W)
+    for std in (1.99e-11, 1.01e-5):
+        with pytest.raises(ValueError, match="positions have standard deviation"):
+            Recording(_gauss(std), frame_interval=DT, exposure=W)
+
+
+# ---- time in ms, temperature in mK ---------------------------------------------------------------
+RATES = [100, 200, 500, 1000, 1500, 2000, 5000, 10_000]  # frames/s; in ms: 10 .. 0.1 "s"
+
+
+@pytest.mark.parametrize("fps", RATES)
+def test_frame_interval_in_ms_is_caught_for_common_rates(fps):
+    dt_ms = 1e3 / fps
+    with pytest.raises(ValueError, match=rf"frame_interval = {dt_ms!r} s is at least 0.1 s "
+                       rf".*looks like ms.*did you mean {dt_ms * 1e-3!r} s, {fps:g} frames/s"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=dt_ms, exposure=1e-4)
+    with pytest.raises(ValueError, match=rf"exposure = {dt_ms!r} s is at least 0.1 s .*looks like ms"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=0.05, exposure=dt_ms)
+    r = Recording(trace(np.random.default_rng(0)), frame_interval=dt_ms, exposure=1e-4,
+                  check_units=False)
+    assert r.frame_interval == dt_ms
+
+
+@pytest.mark.parametrize("fps", [20, 25, 30, 60, 100, 1500, 1e4, 1e5, 1e6])
+def test_genuine_frame_rates_pass(fps):
+    r = Recording(trace(np.random.default_rng(0)), frame_interval=1 / fps, exposure=0.5 / fps)
+    assert r.sampling_rate == pytest.approx(fps)
+
+
+def test_interval_bound_is_at_0_1_s():
+    x = trace(np.random.default_rng(0))
+    Recording(x, frame_interval=0.0999, exposure=0.05)
+    with pytest.raises(ValueError, match="frame_interval = 0.1 s is at least 0.1 s"):
+        Recording(x, frame_interval=0.1, exposure=0.05)
+
+
+def test_times_in_ms_with_frame_interval_in_s():
+    t_ms = np.arange(200) * (1e3 / 1500)
+    with pytest.raises(ValueError, match=r"times imply a frame interval of 0.666667 s .*"
+                       r"frame_interval = 0.000666667 s.*the times look like ms"):
+        Recording(trace(np.random.default_rng(0)), frame_interval=1 / 1500, exposure=1e-4,
+                  times=t_ms)
+
+
+@pytest.mark.parametrize(
+    "temp, match",
+    [
+        (295_000.0, r"temperature = 295000.0 K is above 400 K: this looks like millikelvin "
+                    r"\(did you mean 295 K\?\)"),
+        (310_150.0, r"looks like millikelvin \(did you mean 310.15 K\?\)"),
+        (1e6, r"temperature = 1000000.0 K is above 400 K: no trapping experiment .*"
+              r"Expected kelvin between 100 and 400 K"),
+        (400.5, r"temperature = 400.5 K is above 400 K"),
+        (5000.0, r"above 400 K: no trapping experiment in liquid water"),
+    ],
+)
+def test_implausibly_hot_temperatures(temp, match):
+    x = trace(np.random.default_rng(0))
+    with pytest.raises(ValueError, match=match):
+        Recording(x, frame_interval=DT, exposure=W, temperature=temp)
+    assert Recording(x, frame_interval=DT, exposure=W, temperature=temp,
+                     check_units=False).temperature == temp
+
+
+@pytest.mark.parametrize("temp", [100.0, 273.15, 295.0, 373.15, 400.0])
+def test_plausible_temperatures_pass(temp):
+    assert make(np.random.default_rng(0), temperature=temp).temperature == temp
+
+
+# ---- text where numbers are expected -------------------------------------------------------------
+TEXT_POSITIONS = [
+    np.array(["1e-9", "2e-9", "-1e-9"]),  # numpy str (would cast silently)
+    ["1e-9", "2e-9", "-1e-9"],  # list of str
+    np.array([b"1e-9", b"2e-9"]),  # bytes
+    [1e-9, "2e-9", 3e-9],  # mixed: numpy makes all of it text
+    np.array([1e-9, "2e-9", 3e-9], dtype=object),  # object array with a str
+    np.array(["a", "b"]),
+]
+
+
+@pytest.mark.parametrize("positions", TEXT_POSITIONS, ids=range(len(TEXT_POSITIONS)))
+def test_text_positions_are_a_clear_error(positions):
+    from blurtrap.data import from_arrays
+
+    match = r"positions must be numeric \[{}\]; got text \(an array of dtype .*\)\. Convert"
+    with pytest.raises(ValueError, match=match.format("m")):
+        Recording(positions, frame_interval=DT, exposure=W)
+    with pytest.raises(ValueError, match=match.format("nm")):
+        from_arrays(positions, frame_interval=DT, exposure=W, position_unit="nm")
+
+
+def test_text_times_are_a_clear_error(rng):
+    with pytest.raises(ValueError, match=r"times must be numeric \[s\]; got text"):
+        make(rng, times=[str(i * DT) for i in range(200)])
+
+
+def test_object_arrays_of_numbers_are_converted_with_the_unit():
+    """An object array of numbers (e.g. Decimal) is converted, and from_arrays applies the
+    unit to it (it used to pass such arrays on without converting nm to m)."""
+    from decimal import Decimal
+
+    from blurtrap.data import from_arrays
+
+    vals = np.array([Decimal("1.5"), Decimal("-2"), Decimal("3")], dtype=object)
+    r = from_arrays(vals, frame_interval=DT, exposure=W, position_unit="nm")
+    np.testing.assert_array_equal(r.positions, [1.5e-9, -2e-9, 3e-9])
+
+
+# ---- timing jitter: per-interval, not the accumulated clock wander ------------------------------
+def test_jitter_of_a_wandering_clock_is_the_per_interval_std():
+    """Intervals dt + e_i with independent e_i of std 33 us (the clock wanders): the reported
+    jitter std is ~33 us, while the deviation from the best regular grid (grid_std) is the
+    accumulated wander, tens of times larger."""
+    rng = np.random.default_rng(12)
+    n, dt, s = 90_000, 1 / 1500, 33e-6
+    t = np.concatenate([[0.0], np.cumsum(dt + rng.normal(0, s, n - 1))])
+    r = Recording(rng.normal(0, 1e-8, n), frame_interval=dt, exposure=1e-4, times=t,
+                  allow_irregular=True)
+    j = r.timing_jitter
+    assert j.std == pytest.approx(s, rel=0.02)
+    assert j.std == pytest.approx(float(np.std(np.diff(t))), rel=1e-12)
+    assert j.grid_std > 20 * j.std and j.max_deviation > j.grid_std
+    assert j.fitted_interval == pytest.approx(dt, rel=1e-3)
+
+
+def test_jitter_of_independent_stamp_errors():
+    """t_i = i dt + delta_i, delta_i independent with std sigma: std = sqrt(2) sigma (the
+    intervals' std) and grid_std = sigma."""
+    rng = np.random.default_rng(13)
+    n, dt, sigma = 50_000, 1e-3, 2e-5
+    t = np.arange(n) * dt + rng.normal(0, sigma, n)
+    j = Recording(rng.normal(0, 1e-8, n), frame_interval=dt, exposure=1e-4, times=t,
+                  allow_irregular=True).timing_jitter
+    assert j.std == pytest.approx(np.sqrt(2) * sigma, rel=0.02)
+    assert j.grid_std == pytest.approx(sigma, rel=0.02)
+
+
+def test_irregular_error_reports_both_jitters():
+    rng = np.random.default_rng(14)
+    t = np.concatenate([[0.0], np.cumsum(DT + rng.normal(0, 1e-5, 999))])
+    with pytest.raises(ValueError, match=r"per-interval jitter \(std of the frame intervals\) std "
+                       r"\S+e-0[56] s and max deviation .* grid deviation std .* s\).*"
+                       r"allow_irregular=True"):
+        Recording(trace(rng, 1000), frame_interval=DT, exposure=W, times=t)
+
+
+def test_timing_jitter_positional_construction_still_works():
+    j = TimingJitter(1e-5, 2e-5, 1e-3)
+    assert (j.std, j.max_deviation, j.fitted_interval, j.grid_std) == (1e-5, 2e-5, 1e-3, None)

@@ -108,7 +108,13 @@ MANIFEST_CASES = [
     ("exposure -Infinity", '{"position_unit": "nm", "recordings": [{"file": "a.csv", "exposure_s": -Infinity}]}',
      r"a.csv: exposure must be finite"),
     ("exposure > frame interval", R(exposure_s=2e-3), r"a.csv: exposure = 0.002 s is longer than frame_interval"),
-    ("exposure in ms", R(exposure_s=2.0, frame_interval_s=3.0), r"a.csv: frame_interval = 3.0 s is longer than 1 s"),
+    ("exposure in ms", R(exposure_s=2.0, frame_interval_s=3.0),
+     r"a.csv: frame_interval = 3.0 s is at least 0.1 s .*looks like ms"),
+    ("1500 fps interval in ms", R(frame_interval_s=0.6667),
+     r"a.csv: frame_interval = 0.6667 s is at least 0.1 s .*looks like ms"),
+    ("temperature mK", R(temperature_K=295000),
+     r"temperature = 295000.0 K is above 400 K: this looks like millikelvin"),
+    ("temperature 1e6 K", R(temperature_K=1e6), r"temperature = 1000000.0 K is above 400 K"),
     *[(f"frame_interval_s={v!r}", R(frame_interval_s=v), r"frame_interval must be > 0 \[s\]") for v in (-1e-3, 0)],
     ("frame_interval vs times", R(frame_interval_s=2e-3, exposure_s=1e-4),
      r"a.csv: times imply a frame interval of 0.001 s"),
@@ -340,8 +346,9 @@ def _outcome(path, mode):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ExcludedRowsWarning)
         try:
+            px = 1e-7 if b"x_px" in path.read_bytes()[:64] else None  # only 'px' takes one
             r = load_csv(path, exposure=1e-4, frame_interval=1e-3, on_bad_rows=mode,
-                         allow_irregular=True, pixel_size_m=1e-7, check_units=False)
+                         allow_irregular=True, pixel_size_m=px, check_units=False)
         except ValueError as e:
             return ("error", str(e))
     return ("ok", _bits(r), dict(r.metadata))
@@ -381,7 +388,8 @@ def test_fast_path_equals_line_by_line_path(content, mode):
     if not body.endswith("\n"):
         body += "\n"
     try:
-        has_time, xcol, unit, _ = csv_mod._parse_header(Path("f.csv"), header, None, 1e-7)
+        px = 1e-7 if "x_px" in header else None  # pixel_size_m only goes with 'px'
+        has_time, xcol, unit, _ = csv_mod._parse_header(Path("f.csv"), header, None, px)
     except ValueError:
         return
     fast = csv_mod._RowParser(Path("f.csv"), has_time, xcol, unit, mode)
