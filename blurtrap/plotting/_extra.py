@@ -19,7 +19,8 @@ from ._common import (
 )
 
 
-def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 0.84)):
+def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 0.84),
+           fig=None):
     r"""Corner plot of posterior samples, in lab units.
 
     - `samples`: mapping ``name -> 1-D array`` of samples in SI units (names such as ``k``,
@@ -29,6 +30,7 @@ def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 
     - `labels`: optional mapping ``name -> axis label`` (overrides the default
       ``"name [unit]"``).
     - `quantiles`: drawn as dashed lines on the marginal histograms.
+    - `fig`: an empty figure to draw into (default: a new pyplot figure).
 
     **Returns:** Figure with an ``n x n`` grid of axes (upper triangle hidden).
     """
@@ -43,7 +45,7 @@ def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 
         fac, _, _ = lab(nme)
         data.append(arr * fac)
     n = len(names)
-    fig, axes = new_figure(n, n, figsize=(2.3 * n + 0.6, 2.3 * n + 0.4))
+    fig, axes = new_figure(n, n, figsize=(2.3 * n + 0.6, 2.3 * n + 0.4), fig=fig)
     axes = np.asarray(axes).reshape(n, n)
 
     def axis_label(nme):
@@ -102,7 +104,8 @@ def _binned(f, ratio, n_bins=20):
     return np.asarray(fc), np.asarray(rm), np.asarray(cnt)
 
 
-def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("before", "after")):
+def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("before", "after"),
+                           fig=None):
     r"""Blocked-PSD residuals (data/model) of two fits of the same recording, one panel each:
     e.g. the ``naive`` model before and the ``standard`` model after adding motion blur,
     aliasing and tracking noise. Dots: each frequency; line: log-binned mean with its
@@ -111,12 +114,13 @@ def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("b
     - `fit_a`, `fit_b`: ``CalibrationResult`` objects (or mappings with ``k``, ``gamma``,
       ``tracking_var``, ``model``) for `recording`.
     - `n_blocks`: blocks of the periodogram (default: what `fit_b` used).
+    - `fig`: an empty figure to draw into (default: a new pyplot figure).
 
     **Returns:** Figure with two axes sharing the frequency axis.
     """
     nb = fit_n_blocks(fit_b, recording, n_blocks)
     f, p, nb = blocked_psd(recording, nb)
-    fig, axes = new_figure(2, 1, figsize=(6.4, 5.6), sharex=True)
+    fig, axes = new_figure(2, 1, figsize=(6.4, 5.6), sharex=True, fig=fig)
     for ax, fit, tag in zip(axes, (fit_a, fit_b), labels, strict=False):
         ratio = p / model_psd(fit, recording, f)
         fb, rb, cnt = _binned(f, ratio)

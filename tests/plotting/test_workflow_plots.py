@@ -1,0 +1,86 @@
+"""Figures are made through pyplot (so Jupyter's inline backend shows them) unless `ax=`/`fig=`
+says where to draw."""
+
+import math
+
+import numpy as np
+import pytest
+
+import blurtrap as bt
+from blurtrap.inference import CalibrationResult
+
+plotting = pytest.importorskip("blurtrap.plotting")
+import matplotlib.pyplot as plt  # noqa: E402
+
+GAMMA = 6 * math.pi * 0.00095 * 1.53e-6
+DT = 1 / 1500
+EPS2 = 4e-18
+DRIFT = [{"effect": "drift", "delta_aic": 1.0}]
+
+
+def fake_fit(model="standard", k=1e-5, gof_p=0.35, n_rec=1):
+    names = ("k", "gamma", "tracking_var")
+    vals = np.array([k, GAMMA, EPS2])
+    return CalibrationResult(
+        method="likelihood", model=model, param_names=names, values=vals,
+        covariance=np.diag((0.01 * vals) ** 2), temperature=295.0,
+        k_per_recording=np.full(n_rec, k), k_per_recording_err=np.full(n_rec, 0.01 * k),
+        gof={"test": "binned spectral chi2", "statistic": 130.0, "dof": 125, "p_value": gof_p},
+        n_recordings=n_rec, n_frames=4096 * n_rec, extras={"n_blocks": 1})
+
+
+def noise_recording(seed, n=4096, drift=0.0):
+    rng = np.random.default_rng(seed)
+    from blurtrap.plotting._common import model_psd
+
+    rec0 = bt.Recording(rng.standard_normal(8) * 1e-9, frame_interval=DT, exposure=DT)
+    f = np.fft.rfftfreq(n, DT)
+    f[0] = 0.25 / (n * DT)
+    amp = np.sqrt(model_psd({"k": 1e-5, "gamma": GAMMA, "tracking_var": EPS2}, rec0, f) * n / DT)
+    z = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / np.sqrt(2)
+    z[0] = 0.0
+    x = np.fft.irfft(amp * z, n) + drift * np.cumsum(rng.standard_normal(n))
+    return bt.Recording(x, frame_interval=DT, exposure=DT)
+
+
+def render(fig, tmp_path, name="fig.png"):
+    path = tmp_path / name
+    fig.savefig(path, dpi=50)
+    assert path.stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------------------------
+# pyplot figures (shown by Jupyter's inline backend), ax=/fig= draw where told
+# --------------------------------------------------------------------------------------------
+def test_figures_are_made_through_pyplot():
+    before = set(plt.get_fignums())
+    fig = plotting.diagnose_ranking(DRIFT)
+    assert fig.number in set(plt.get_fignums()) - before
+    plotting.close(fig)
+    assert fig.number not in plt.get_fignums()
+
+
+def test_ax_and_fig_draw_where_told_without_new_pyplot_figures(tmp_path):
+    from matplotlib.figure import Figure
+
+    rec = noise_recording(5, n=1024)
+    before = len(plt.get_fignums())
+    host = Figure()
+    ax = host.subplots()
+    assert plotting.diagnose_ranking(DRIFT, ax=ax) is host
+    for make in (lambda f: plotting.residuals_before_after(fake_fit(), fake_fit(), rec, fig=f),
+                 lambda f: plotting.fig7_deviation(rec, fake_fit(), n_blocks=4, fig=f),
+                 lambda f: plotting.corner({"k": np.linspace(1, 2, 50) * 1e-5,
+                                            "gamma": np.linspace(1, 2, 50) * GAMMA}, fig=f)):
+        f = Figure()
+        assert make(f) is f and f.axes
+    assert len(plt.get_fignums()) == before
+    with pytest.raises(ValueError, match="empty figure"):
+        plotting.residuals_before_after(fake_fit(), fake_fit(), rec, fig=host)
+
+
+def test_save_closes_the_figure(tmp_path):
+    fig = plotting.diagnose_ranking(DRIFT)
+    plotting.save(fig, tmp_path / "r.png", dpi=40)
+    assert (tmp_path / "r.png").stat().st_size > 1000
+    assert fig.number not in plt.get_fignums()
