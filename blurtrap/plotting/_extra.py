@@ -19,6 +19,30 @@ from ._common import (
 )
 
 
+def _inner_ticks_locator():
+    from matplotlib.ticker import MaxNLocator
+
+    class InnerTicks(MaxNLocator):
+        """2-3 round ticks away from the ends of the axis: a label centred on a tick near an
+        end would run into the tick labels of the neighbouring panel."""
+
+        def __init__(self):
+            super().__init__(nbins=3)
+
+        def __call__(self):
+            lo, hi = sorted(self.axis.get_view_interval())
+            m = 0.12 * (hi - lo)
+            for nb in (3, 5):
+                self.set_params(nbins=nb)
+                ticks = [t for t in self.tick_values(lo, hi) if lo + m <= t <= hi - m]
+                if len(ticks) >= 2:
+                    break
+            self.set_params(nbins=3)
+            return ticks
+
+    return InnerTicks()
+
+
 def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 0.84),
            fig=None):
     r"""Corner plot of posterior samples, in lab units.
@@ -31,6 +55,9 @@ def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 
       ``"name [unit]"``).
     - `quantiles`: drawn as dashed lines on the marginal histograms.
     - `fig`: an empty figure to draw into (default: a new pyplot figure).
+
+    Ticks: 2-3 per axis, none near the ends, so that neighbouring panels' tick labels do
+    not overlap.
 
     **Returns:** Figure with an ``n x n`` grid of axes (upper triangle hidden).
     """
@@ -78,6 +105,11 @@ def corner(samples, truths=None, *, bins=30, labels=None, quantiles=(0.16, 0.5, 
                     ax.axvline(tx, color="C3", lw=1.0)
                     ax.axhline(ty, color="C3", lw=1.0)
                     ax.plot([tx], [ty], "s", color="C3", ms=4)
+            ax.xaxis.set_major_locator(_inner_ticks_locator())
+            ax.tick_params(axis="x", labelsize=8)
+            if i != j:
+                ax.yaxis.set_major_locator(_inner_ticks_locator())
+                ax.tick_params(axis="y", labelsize=8)
             if i == n - 1:
                 ax.set_xlabel(axis_label(names[j]))
             else:
@@ -114,6 +146,7 @@ def residuals_before_after(fit_a, fit_b, recording, *, n_blocks=None, labels=("b
     - `fit_a`, `fit_b`: ``CalibrationResult`` objects (or mappings with ``k``, ``gamma``,
       ``tracking_var``, ``model``) for `recording`.
     - `n_blocks`: blocks of the periodogram (default: what `fit_b` used).
+    - `fig`: an empty figure to draw into (default: a new pyplot figure).
     - `fig`: an empty figure to draw into (default: a new pyplot figure).
 
     **Returns:** Figure with two axes sharing the frequency axis.
