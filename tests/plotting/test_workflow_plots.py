@@ -1,5 +1,6 @@
-"""Corner tick labels do not collide, and figures are made through pyplot (so Jupyter's inline
-backend shows them) unless `ax=`/`fig=` says where to draw."""
+"""Residuals work for a RecordingSet on a log ratio axis, corner tick labels do not collide,
+and figures are made through pyplot (so Jupyter's inline backend shows them) unless
+`ax=`/`fig=` says where to draw."""
 
 import math
 
@@ -119,3 +120,33 @@ def test_corner_tick_labels_do_not_overlap(seed, tmp_path):
     for ax in fig.axes:
         if ax.axison:
             assert len([t for t in ax.get_xticklabels() if t.get_text()]) <= 4
+
+
+# --------------------------------------------------------------------------------------------
+# residuals_before_after
+# --------------------------------------------------------------------------------------------
+def test_residuals_for_a_recording_set(tmp_path):
+    recs = bt.RecordingSet([noise_recording(1), noise_recording(2, n=2048)])
+    fit = fake_fit(n_rec=2)
+    fig = plotting.residuals_before_after(fit, fit, recs, labels=("base", "with drift"))
+    render(fig, tmp_path)
+    a1, a2 = fig.axes
+    assert "2 recordings pooled" in a1.get_title()
+    pts = a1.get_lines()[0]
+    assert pts.get_xdata().size == 2048 + 1024  # every ordinate of both recordings
+    fig = plotting.residuals_before_after(fit, fit, list(recs), per_recording=True)
+    render(fig, tmp_path, "per.png")
+    assert len(fig.axes) == 4
+    assert [a.get_lines()[0].get_xdata().size for a in fig.axes] == [2048, 1024, 2048, 1024]
+
+
+def test_residuals_ratio_axis_is_logarithmic_and_shows_a_large_drift(tmp_path):
+    rec = noise_recording(4, drift=2e-9)
+    fit = fake_fit()
+    fig = plotting.residuals_before_after(fit, fit, rec)
+    render(fig, tmp_path)
+    for ax in fig.axes:
+        assert ax.get_yscale() == "log"
+        ratio = ax.get_lines()[0].get_ydata()
+        assert ratio.max() > 100  # the drift's low-frequency excess ...
+        assert ax.get_ylim()[1] >= ratio.max()  # ... is on the axis
