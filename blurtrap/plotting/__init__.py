@@ -1,10 +1,16 @@
 """blurtrap.plotting: matplotlib figures of recordings and calibrations (lab units).
 
 Imported only on request (``import blurtrap.plotting``); ``import blurtrap`` never imports
-matplotlib. Every function returns a ``matplotlib.figure.Figure`` built without pyplot
-(Jupyter displays it; save with ``fig.savefig(path)``), takes SI inputs (recordings,
-``CalibrationResult`` objects, arrays) and labels its axes in lab units. Plots compute no
-fits: fit with :func:`blurtrap.calibrate` and pass the results in.
+matplotlib. Every function returns a ``matplotlib.figure.Figure``, takes SI inputs
+(recordings, ``CalibrationResult`` objects, arrays) and labels its axes in lab units. Plots
+compute no fits: fit with :func:`blurtrap.calibrate` and pass the results in.
+
+Where the figure goes: with ``ax=`` (one-axes figures) or ``fig=`` (an empty figure, for the
+multi-axes ones) the function draws there and makes no new figure; otherwise it makes a new
+figure with pyplot, so that Jupyter's inline backend shows it at the end of the cell (don't also
+end the cell with the figure, or it shows twice: ``fig = bp.fig6_psd(...)``) and a script can
+``plt.show()`` it. Code that only writes files should close what it saves:
+``blurtrap.plotting.save(fig, path)`` saves and closes, :func:`close` closes.
 
 The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 :func:`fig1b_histogram`, :func:`fig3_fractional_variance`, :func:`fig4_stiffness_vs_power`,
@@ -13,6 +19,8 @@ The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 """
 
 from ._common import LAB_UNITS as LAB_UNITS
+from ._common import close as close
+from ._common import save as save
 from ._extra import (
     corner as corner,
 )
@@ -49,6 +57,7 @@ from ._paper import (
 
 __all__ = [
     "LAB_UNITS",
+    "close",
     "corner",
     "diagnose_ranking",
     "fig1a_universal_curve",
@@ -60,4 +69,5 @@ __all__ = [
     "fig7_deviation",
     "naive_error_map",
     "residuals_before_after",
+    "save",
 ]

@@ -35,16 +35,45 @@ def lab(name: str):
     return 1.0, "SI", name
 
 
-def new_figure(nrows=1, ncols=1, *, figsize=None, ax=None, **kw):
-    """A matplotlib Figure (no pyplot state: safe in scripts, notebooks and threads), or the
-    figure of a given `ax` when the caller draws into an existing axes."""
-    if ax is not None:
-        return ax.figure, ax
-    from matplotlib.figure import Figure
+def new_figure(nrows=1, ncols=1, *, figsize=None, ax=None, fig=None, **kw):
+    """The figure and axes to draw into.
 
-    fig = Figure(figsize=figsize, layout="constrained")
-    axes = fig.subplots(nrows, ncols, squeeze=True, **kw)
+    - `ax` given: draw into it (its figure is returned; one-axes plots only).
+    - `fig` given: add the subplots to that (empty) figure.
+    - neither: a new figure made with pyplot, so that Jupyter's inline backend displays it
+      at the end of the cell and scripts can ``plt.show()`` it; a caller that only saves it
+      closes it with ``plt.close(fig)`` (or :func:`blurtrap.plotting.save`).
+    """
+    if ax is not None:
+        if nrows * ncols != 1:
+            raise ValueError(f"this figure has {nrows} x {ncols} axes: pass fig=, not ax=")
+        return ax.figure, ax
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=figsize, layout="constrained")
+    elif fig.axes:
+        raise ValueError("fig must be an empty figure (it already has axes); pass ax= to draw "
+                         "into an existing axes")
+    kw.setdefault("squeeze", True)
+    axes = fig.subplots(nrows, ncols, **kw)
     return fig, axes
+
+
+def save(fig, path, **kw):
+    """Save `fig` to `path` (``fig.savefig(path, **kw)``) and close it, so that a script or
+    the CLI that only writes figures keeps none open in pyplot."""
+    fig.savefig(path, **kw)
+    close(fig)
+
+
+def close(fig):
+    """Release a figure made by a plotting function (no-op if pyplot does not manage it)."""
+    import sys
+
+    plt = sys.modules.get("matplotlib.pyplot")
+    if plt is not None:
+        plt.close(fig)
 
 
 def is_result(obj) -> bool:

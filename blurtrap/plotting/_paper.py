@@ -1,8 +1,8 @@
 """The seven figures of Wong & Halvorsen, Opt. Express 14, 12517 (2006), from blurtrap objects.
 
-Every function returns a matplotlib ``Figure`` (drawn in lab units, labelled) and computes no
-fits: pass it recordings and ``CalibrationResult`` objects (SI units) made with
-``blurtrap.calibrate``.
+Every function returns a matplotlib ``Figure`` (drawn in lab units, labelled; a new pyplot
+figure unless ``ax=``/``fig=`` says where to draw) and computes no fits: pass it recordings
+and ``CalibrationResult`` objects (SI units) made with ``blurtrap.calibrate``.
 """
 
 from __future__ import annotations
@@ -483,13 +483,14 @@ def fig6_psd(recording, fits=None, *, n_blocks=None, one_sided=True, ax=None):
     return fig
 
 
-def fig7_deviation(recording, fit, *, n_blocks=None, bins=25):
+def fig7_deviation(recording, fit, *, n_blocks=None, bins=25, fig=None):
     r"""Fig. 7: fractional deviation data/model of the blocked PSD: scatter vs frequency with
     the ``1 +- 1/sqrt(n_blocks)`` band, and its histogram with the normal approximation and
     the exact Gamma(n_blocks) law (mean 1) of an average of n_blocks periodograms
     (appendix C; Berg-Sorensen & Flyvbjerg 2004).
 
     - `recording`, `fit` (a ``CalibrationResult``), `n_blocks` (default: what the fit used).
+    - `fig`: an empty figure to draw into (default: a new pyplot figure).
 
     **Returns:** Figure with two axes.
     """
@@ -497,7 +498,7 @@ def fig7_deviation(recording, fit, *, n_blocks=None, bins=25):
     f, p, nb = blocked_psd(recording, nb)
     ratio = p / model_psd(fit, recording, f)
     sd = 1.0 / math.sqrt(nb)
-    fig, (a1, a2) = new_figure(1, 2, figsize=(9.0, 3.8),
+    fig, (a1, a2) = new_figure(1, 2, figsize=(9.0, 3.8), fig=fig,
                                gridspec_kw=dict(width_ratios=(2, 1)))
     a1.plot(f, ratio, ".", color="0.3", ms=3, label="data / model")
     a1.axhline(1.0, color="k", lw=0.8)

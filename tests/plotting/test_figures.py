@@ -306,14 +306,20 @@ def test_diagnose_ranking(tmp_path):
         plotting.diagnose_ranking([{"effect": "drift"}])
 
 
-def test_plotting_uses_no_pyplot_state():
+def test_plotting_imports_pyplot_only_to_make_a_figure():
+    """Importing blurtrap.plotting selects no backend; a figure made without ax=/fig= is a
+    pyplot figure (so that Jupyter's inline backend displays it)."""
+    import os
     import subprocess
     import sys
 
     code = ("import blurtrap.plotting, sys, numpy as np; "
-            "blurtrap.plotting.diagnose_ranking([{'effect': 'drift', 'delta_aic': 1.0}]); "
-            "sys.exit(1 if 'matplotlib.pyplot' in sys.modules else 0)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+            "assert 'matplotlib.pyplot' not in sys.modules; "
+            "fig = blurtrap.plotting.diagnose_ranking([{'effect': 'drift', 'delta_aic': 1.0}]); "
+            "import matplotlib.pyplot as plt; "
+            "sys.exit(0 if plt.get_fignums() == [fig.number] else 1)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "MPLBACKEND": "Agg"})
     assert out.returncode == 0, out.stderr
 
 
