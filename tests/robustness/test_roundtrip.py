@@ -42,11 +42,14 @@ METADATA = st.dictionaries(
 def recordings(draw, check_units=None):
     n = draw(st.integers(2, 40))
     check = draw(st.booleans()) if check_units is None else check_units
-    bound = 1e-3 if check else 1e300  # check_units rejects a position std above 1 mm
+    bound = 1e-5 if check else 1e300  # check_units: a position std within 2e-11..1e-5 m
     pos = draw(st.lists(st.floats(-bound, bound, allow_nan=False), min_size=n, max_size=n))
     pos[0] = draw(st.sampled_from([pos[0], 0.0, -0.0, 5e-324, -2.2250738585072014e-308]))
     assume(len(set(pos)) > 1)
-    dt = draw(st.floats(1e-6, 0.5))  # (irregular stamps stretch it by up to 1.5)
+    if check:
+        assume(2e-11 <= np.std(pos) <= 1e-5)
+    # (irregular stamps stretch it by up to 1.5; check_units rejects intervals >= 0.1 s)
+    dt = draw(st.floats(1e-6, 0.06 if check else 0.5))
     times, allow_irregular, tol = None, False, 1e-3
     kind = draw(st.sampled_from(["none", "regular", "irregular"]))
     if kind == "regular":
