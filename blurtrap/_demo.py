@@ -595,8 +595,10 @@ def demo(out="blurtrap-demo", *, quick=False, quiet=False, seed=0, config=None):
     figures = []
 
     def save(fig, name, caption):
+        from .plotting import save as save_figure  # saves, then closes the pyplot figure
+
         path = outdir / f"{name}.png"
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
         figures.append({"file": path.name, "caption": caption})
 
     def figs():

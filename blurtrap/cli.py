@@ -315,6 +315,9 @@ def main(argv=None) -> int:
     debug = getattr(args, "debug", False)
     try:
         if args.command == "demo":
+            import matplotlib
+
+            matplotlib.use("Agg")  # files only: never a GUI window from the command line
             from ._demo import run_demo
 
             return run_demo(args)
