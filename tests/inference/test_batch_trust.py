@@ -157,3 +157,16 @@ def test_false_alarm_rate_of_the_goodness_of_fit():
     assert flagged <= 1
     assert (b.status == "ok").sum() >= 399
     assert 6 <= (b.gof_p < 0.05).sum() <= 36
+
+
+def test_at_bound_flags_items_with_eps2_held_at_zero():
+    """Without tracking noise the fit holds eps^2 at 0 in about half the items; those are
+    flagged (their k error is conditional on eps^2 = 0), as calibrate's result.at_bounds."""
+    x = ar1(K, N, 7, eps=0.0, seed=8)  # the fixture's shape: no new compilation
+    b = bt.calibrate_batch(x, frame_interval=DT, exposure=W0)
+    assert b.success.all()
+    assert b.at_bound.any() and not b.at_bound.all()
+    assert b.at_bound[np.isnan(b.tracking_var_err)].all()
+    for i in range(7):
+        one = bt.calibrate(bt.Recording(x[i], frame_interval=DT, exposure=W0))
+        assert b.at_bound[i] == ("tracking_var" in one.at_bounds), i
