@@ -170,3 +170,19 @@ def test_at_bound_flags_items_with_eps2_held_at_zero():
     for i in range(7):
         one = bt.calibrate(bt.Recording(x[i], frame_interval=DT, exposure=W0))
         assert b.at_bound[i] == ("tracking_var" in one.at_bounds), i
+
+
+def test_blocked_psd_items_get_calibrates_goodness_of_fit():
+    """n_blocks > 1 (Gamma likelihood of block averages): the same p-value as
+    calibrate(method='psd', n_blocks=8), and a 50 Hz line is still found."""
+    n = 16384
+    x = ar1(K, n, 3, seed=21)
+    x[2] += 30e-9 * np.sin(2 * np.pi * 50.0 * np.arange(n) * DT)
+    b = bt.calibrate_batch(x, frame_interval=DT, exposure=W0, n_blocks=8)
+    assert list(b.status[:2]) == ["ok", "ok"]
+    assert b.status[2].startswith("inadequate") and "line at 4" in b.status[2], b.status[2]
+    for i in range(2):
+        one = bt.calibrate(bt.Recording(x[i], frame_interval=DT, exposure=W0), method="psd",
+                           n_blocks=8)
+        assert abs(b.k[i] / one.k - 1) < 1e-8
+        assert b.gof_dof == one.gof["dof"] and abs(b.gof_p[i] - one.gof["p_value"]) < 1e-6
