@@ -220,7 +220,9 @@ def calibrate_batch(
     Items are independent: each has its own ``status`` and a failing item never aborts
     the batch (its errors are NaN). Uses the Whittle likelihood (``n_blocks=1``, the
     default of :func:`calibrate` for long records) or the blocked-PSD Gamma likelihood
-    (``n_blocks > 1``) with the given model.
+    (``n_blocks > 1``) with the given model. It stays Whittle where ``calibrate``'s default
+    would switch to the exact likelihood (records of <= 2^14 frames, or tau not short
+    compared with the record).
     All rows share ``frame_interval`` [s], ``exposure`` [s] and ``temperature`` [K].
 
     Every item gets the checks of :func:`calibrate`, without aborting the others:
@@ -240,8 +242,9 @@ def calibrate_batch(
       p-value is ``gof_p``, and items below ``gof_threshold`` are ``"inadequate: goodness of
       fit p = ... (line at 50 Hz? ...)"`` (a missing effect: line noise, drift, a detector
       filter; diagnose such a row with :func:`blurtrap.diagnose`). False-alarm rate at the
-      default 1e-4, measured on honest items: 3 of 7400 flagged (0.04 %; nominal 0.01 %:
-      the binned statistic's tail is a little heavier than chi^2), namely 3/5000 exact
+      default 1e-4, measured on honest items: 3 of 7400 flagged (0.04 %; nominal 0.01 %,
+      consistent with a tail a little heavier than chi^2's: each bin's term has variance
+      2 + 6/64, not 2), namely 3/5000 exact
       AR(1) records of 16 384 frames (W ~ 0, dt/tau = 0.5, 2 nm white noise; 125 dof),
       0/1000 of 4096 frames, and 0/1400 simulated camera records (W = dt) of 4096 and
       65 536 frames; below p = 0.05 lie 4.9 % of the first 5000 (nominal 5 %).
@@ -253,7 +256,9 @@ def calibrate_batch(
     calibrate.
 
     **Returns:** :class:`BatchCalibration` with per-item values, errors, ``status``,
-    ``success`` (status ``"ok"``), ``gof_p`` and ``lag1_z``.
+    ``success`` (status ``"ok"``), ``gof_p``, ``lag1_z`` and ``at_bound`` (an "ok" item
+    with eps^2 held at 0, whose other errors are conditional on it and can be far too
+    small).
     """
     warn_if_float32("positions", positions)
     y = np.asarray(positions, dtype=float)
