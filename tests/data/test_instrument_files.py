@@ -470,6 +470,15 @@ def test_tdms_nan_and_text(nptdms, tmp_path, rng):
         load_tdms(p, "Trap", "label", exposure=1e-4)
 
 
+def test_not_a_tdms_file(nptdms, tmp_path):
+    p = tmp_path / "fake.tdms"
+    p.write_text("t_s,x_nm\n0,1\n" * 10)
+    with pytest.raises(ValueError, match=r"fake\.tdms: cannot be read as a TDMS file"):
+        load_tdms(p, exposure=1e-4)
+    with pytest.raises(FileNotFoundError, match=r"nope\.tdms: no such file"):
+        load_tdms(tmp_path / "nope.tdms", exposure=1e-4)
+
+
 # -- dispatcher -----------------------------------------------------------------------------
 
 
