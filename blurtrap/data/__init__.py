@@ -1,12 +1,16 @@
-"""Recordings and their I/O: containers, validation, CSV / NPZ / manifest files.
+"""Recordings and their I/O: containers, validation, CSV / NPZ / manifest files, and
+instrument files (HDF5: Bluelake and plain datasets; LabVIEW TDMS).
 
 Positions are in metres and times in seconds. numpy only: importing this subpackage does
-not import jax itself (JAX arrays are accepted as input).
+not import jax itself (JAX arrays are accepted as input). The instrument-file loaders import
+their optional dependencies (h5py, npTDMS) only when called.
 """
 
 from ._csv import ExcludedRowsWarning as ExcludedRowsWarning
 from ._csv import infer_frame_interval as infer_frame_interval
 from ._csv import load_csv as load_csv
+from ._h5 import load_bluelake as load_bluelake
+from ._h5 import load_h5 as load_h5
 from ._io import from_arrays as from_arrays
 from ._io import load as load
 from ._manifest import load_manifest as load_manifest
@@ -16,4 +20,5 @@ from ._npz import save_npz as save_npz
 from ._recording import Recording as Recording
 from ._recording import TimingJitter as TimingJitter
 from ._recording_set import RecordingSet as RecordingSet
+from ._tdms import load_tdms as load_tdms
 from ._units import ALLOWED_UNITS as ALLOWED_UNITS

@@ -143,26 +143,52 @@ def from_arrays(
     return RecordingSet(recs)
 
 
-_LOADERS = {".json": "manifest", ".npz": "npz", ".csv": "csv"}
+_LOADERS = {
+    ".json": "manifest",
+    ".npz": "npz",
+    ".csv": "csv",
+    ".h5": "h5",
+    ".hdf5": "h5",
+    ".tdms": "tdms",
+}
 
 
 def load(path, **kwargs) -> Recording | RecordingSet:
-    """Load recordings from ``path`` by extension: ``.json`` -> :func:`load_manifest`
-    (RecordingSet), ``.npz`` -> :func:`load_npz`, ``.csv`` -> :func:`load_csv` (keywords
-    such as ``exposure`` are passed on)."""
-    from ._csv import load_csv
-    from ._manifest import load_manifest
-    from ._npz import load_npz
+    """Load recordings from ``path`` by extension (keywords are passed on):
 
+    - ``.json`` -> :func:`load_manifest` (RecordingSet), ``.npz`` -> :func:`load_npz`,
+      ``.csv`` -> :func:`load_csv`;
+    - ``.h5`` / ``.hdf5`` -> :func:`load_bluelake` when ``channel=`` is given or the file looks
+      like a Bluelake export (a ``Bluelake version`` root attribute or a ``Force HF`` group),
+      else :func:`load_h5`, which needs ``dataset=`` (the error lists the datasets);
+    - ``.tdms`` -> :func:`load_tdms` (``group=``, ``channel=``).
+
+    HDF5 and TDMS need the optional dependencies h5py (``pip install "blurtrap[h5py]"``) and
+    npTDMS (``pip install "blurtrap[tdms]"``).
+    """
     p = Path(os.fspath(path))
     kind = _LOADERS.get(p.suffix.lower())
     if kind is None:
         raise ValueError(
             f"{p}: unknown file type {p.suffix!r}; expected one of {sorted(_LOADERS)} "
-            "(manifest JSON, NPZ, CSV)"
+            "(manifest JSON, NPZ, CSV, HDF5, TDMS)"
         )
     if kind == "manifest":
+        from ._manifest import load_manifest
+
         return load_manifest(p, **kwargs)
     if kind == "npz":
+        from ._npz import load_npz
+
         return load_npz(p, **kwargs)
-    return load_csv(p, **kwargs)
+    if kind == "csv":
+        from ._csv import load_csv
+
+        return load_csv(p, **kwargs)
+    if kind == "h5":
+        from ._h5 import load_h5_any
+
+        return load_h5_any(p, **kwargs)
+    from ._tdms import load_tdms
+
+    return load_tdms(p, **kwargs)
