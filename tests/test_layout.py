@@ -18,7 +18,9 @@ ALLOWED = {
     "data": {"_constants"},
     "inference": {"physics", "data", "_config", "_constants"},
     "diagnostics": {"physics", "data", "inference", "simulate", "_config", "_constants"},
-    "plotting": {"physics", "data", "inference", "diagnostics", "simulate", "_config", "_constants"},
+    "design": {"physics", "data", "inference", "simulate", "_config", "_constants"},
+    "plotting": {"physics", "data", "inference", "diagnostics", "design", "simulate", "_config",
+                 "_constants"},
 }
 
 

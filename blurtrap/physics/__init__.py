@@ -40,6 +40,12 @@ from ._kernels import (
     variance_general as variance_general,
 )
 from ._spectra import (
+    autocovariance_unchecked as autocovariance_unchecked,
+)
+from ._spectra import (
+    discrete_psd_unchecked as discrete_psd_unchecked,
+)
+from ._spectra import (
     frame_autocovariance as frame_autocovariance,
 )
 from ._spectra import (

@@ -260,3 +260,17 @@ def sample_variance_se(
     eps2 = check_nonnegative("tracking_var", tracking_var, "m^2", what="tracking-error variance")
     n = check_positive("n_frames", n_frames, what="number of frames")
     return jnp.sqrt(_sample_variance_var(n, BOLTZMANN * t / k, gamma / k, w, dt, eps2))
+
+
+def discrete_psd_unchecked(f, sigma2, tau, exposure, frame_interval, tracking_var):
+    """The closed-form discrete PSD [m^2/Hz] in the trap's natural parameters (sigma2 [m^2],
+    tau [s]) without input checks: for optimisers and gradients, whose trial points may be
+    extreme (a checked function would raise there instead of letting a line search step back).
+    """
+    return _psd_discrete(f, sigma2, tau, exposure, frame_interval, tracking_var)
+
+
+def autocovariance_unchecked(lag, sigma2, tau, exposure, frame_interval, tracking_var):
+    """The frame autocovariance C(lag) [m^2] without input checks (see
+    :func:`discrete_psd_unchecked`)."""
+    return _autocovariance(lag, sigma2, tau, exposure, frame_interval, tracking_var)

@@ -1,0 +1,7 @@
+"""Experiment design from the Fisher information of the frame process."""
+
+from ._design import Acquisition as Acquisition
+from ._design import DesignResult as DesignResult
+from ._design import design as design
+from ._fisher import exact_information as exact_information
+from ._fisher import whittle_information as whittle_information

@@ -1,0 +1,285 @@
+"""``bt.design``: the acquisition that minimises the expected error of k and/or gamma.
+
+Each candidate acquisition is a list of recordings (frame interval dt, exposure W, frames N);
+its Fisher information is the sum of the recordings' (:mod:`._fisher`; shared k, gamma, eps^2;
+with photon-limited noise eps^2 = eps_ref^2 W_ref / W, still one shared parameter). The
+continuous choices (dt, W, and the exposures of a series) are optimised by gradients
+(optimistix BFGS on unconstrained coordinates, several starts); the discrete ones (a single
+recording, an exposure series of 2 or 3 exposures, the user's current design, W = dt at the
+fastest frame rate, the paper's series) are compared on the same objective.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._config import float64_scope
+from ..physics import BOLTZMANN
+from ..physics._effects import water_viscosity
+from ._fisher import whittle_information
+
+TARGETS = ("k", "gamma", "both")
+#: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
+PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Acquisition:
+    """One candidate: recordings as (frame_interval [s], exposure [s], n_frames), the predicted
+    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective."""
+
+    label: str
+    recordings: tuple
+    predicted_se: dict  # name -> relative SE (fraction) at each k of the range
+    objective: float
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "objective": self.objective,
+                "recordings": [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
+                               for r in self.recordings],
+                "predicted_relative_se": {n: [float(x) for x in v]
+                                          for n, v in self.predicted_se.items()}}
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignResult:
+    """Result of :func:`design`: the recommended acquisition (``best``), every candidate
+    compared (``candidates``, best first) and the settings used (SI)."""
+
+    best: Acquisition
+    candidates: tuple
+    target: str
+    k: tuple
+    settings: dict
+
+    @property
+    def predicted_se(self) -> dict:
+        """Relative SE of each parameter for the recommended design (worst over the k range)."""
+        return {n: float(np.max(v)) for n, v in self.best.predicted_se.items()}
+
+    def to_dict(self) -> dict:
+        return {"target": self.target, "k_N_per_m": list(self.k), "settings": self.settings,
+                "best": self.best.to_dict(),
+                "candidates": [c.to_dict() for c in self.candidates]}
+
+    def summary(self) -> str:
+        lines = [f"experiment design: minimise the SE of {self.target} (worst case over k = "
+                 + ", ".join(f"{k * 1e3:.3g}" for k in self.k) + " pN/nm)",
+                 f"  {'candidate':<34s} {'recordings (dt ms / W ms / frames)':<44s}"
+                 f" {'SE k %':>8s} {'SE gamma %':>11s}"]
+        for c in self.candidates:
+            recs = "; ".join(f"{r[0] * 1e3:.3g}/{r[1] * 1e3:.3g}/{int(r[2])}"
+                             for r in c.recordings)
+            if len(recs) > 44:
+                recs = recs[:41] + "..."
+            mark = "*" if c is self.best else " "
+            lines.append(f"{mark} {c.label:<34s} {recs:<44s} "
+                         f"{100 * np.max(c.predicted_se['k']):8.3g} "
+                         f"{100 * np.max(c.predicted_se['gamma']):11.3g}")
+        lines.append("(* recommended; SEs from the Whittle Fisher information, relative, "
+                     "worst over the k range)")
+        return "\n".join(lines)
+
+
+def _information(recs, k, gamma, temperature, eps_ref2, w_ref, photon_limited):
+    total = 0.0
+    for dt, w, n in recs:
+        e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
+        total = total + whittle_information(k, gamma, w, dt, n, temperature, e2)
+    return total
+
+
+def _relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited):
+    out = []
+    for k in ks:
+        info = _information(recs, k, gamma, temperature, eps_ref2, w_ref, photon_limited)
+        out.append(jnp.sqrt(jnp.diag(jnp.linalg.inv(info))))
+    return jnp.stack(out)  # (n_k, n_par): SE of log k, log gamma[, log eps^2]
+
+
+def _objective_from_se(se, target):
+    if target == "k":
+        per_k = se[:, 0]
+    elif target == "gamma":
+        per_k = se[:, 1]
+    else:
+        per_k = jnp.sqrt(se[:, 0] * se[:, 1])
+    return jnp.max(per_k)
+
+
+class _Problem(eqx.Module):
+    """`n_exp` recordings at a common frame interval, as a function of unconstrained
+    coordinates ``u = (log(dt/dt_min - 1), logit of each exposure in [w_min, dt - dead])``."""
+
+    dt_min: jax.Array
+    w_min: jax.Array
+    dead: jax.Array
+    budget: jax.Array  # frames per recording, or the total time [s]
+    ks: jax.Array
+    gamma: jax.Array
+    temperature: jax.Array
+    eps_ref2: jax.Array
+    w_ref: jax.Array
+    n_exp: int = eqx.field(static=True)
+    total_time: bool = eqx.field(static=True)
+    photon_limited: bool = eqx.field(static=True)
+    target: str = eqx.field(static=True)
+
+    def recs(self, u):
+        u = jnp.clip(u, -30.0, 30.0)
+        dt = self.dt_min * (1.0 + jnp.exp(u[0]))
+        ws = self.w_min + jax.nn.sigmoid(u[1:]) * (dt - self.dead - self.w_min)
+        n = self.budget / dt / self.n_exp if self.total_time else self.budget
+        return [(dt, ws[i], n) for i in range(self.n_exp)]
+
+
+def _log_objective(u, prob: _Problem):
+    se = _relative_se(prob.recs(u), prob.ks, prob.gamma, prob.temperature, prob.eps_ref2,
+                      prob.w_ref, prob.photon_limited)
+    return jnp.log(_objective_from_se(se, prob.target))
+
+
+@eqx.filter_jit
+def _minimise_all(prob: _Problem, starts):
+    """BFGS from every start at once (vmapped): ``(optima, objective values)``."""
+    solver = optx.BFGS(rtol=1e-6, atol=1e-6)
+
+    def one(u0):
+        sol = optx.minimise(_log_objective, solver, u0, args=prob, max_steps=200, throw=False)
+        val = _log_objective(sol.value, prob)
+        return sol.value, jnp.where(jnp.isfinite(val), val, jnp.inf)
+
+    return jax.vmap(one)(starts)
+
+
+def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
+                 target):
+    recs = tuple((float(dt), float(w), float(n)) for dt, w, n in recs)
+    se = np.asarray(_relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited))
+    names = ("k", "gamma", "tracking_var")[: se.shape[1]]
+    obj = float(_objective_from_se(jnp.asarray(se), target))
+    return Acquisition(label, recs, {n: se[:, i] for i, n in enumerate(names)}, obj)
+
+
+def _check(name, value, lo=0.0, unit=""):
+    if value is None or not np.isfinite(value) or value <= lo:
+        raise ValueError(f"{name} must be a finite number > {lo:g} {unit}; got {name} = "
+                         f"{value!r}")
+    return float(value)
+
+
+@float64_scope
+def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 295.0,
+           max_fps: float, min_exposure: float = 1e-6, dead_time: float = 0.0,
+           n_frames: int | None = None, total_time: float | None = None,
+           tracking_std: float = 0.0, photon_limited: bool = False,
+           reference_exposure: float | None = None, target: str = "k",
+           current=None, series=(1, 2, 3)) -> DesignResult:
+    """Recommend an acquisition that minimises the expected (Cramer-Rao) error.
+
+    **Arguments** (SI):
+
+    - `k`: expected stiffness [N/m], or a range ``(k_min, k_max)`` (the worst case over three
+      log-spaced values is minimised).
+    - `gamma` [N s/m], or `radius` [m] (with `viscosity` [Pa s], default water at
+      `temperature` [K]) for Stokes friction.
+    - `max_fps` [Hz]: fastest frame rate; `min_exposure` [s]; `dead_time` [s] (W <= dt - dead).
+    - `n_frames` per recording, or `total_time` [s] shared by all recordings (one required).
+    - `tracking_std` [m]: tracking-error rms; with `photon_limited` it scales as
+      ``sqrt(reference_exposure / W)`` (default reference: 1/max_fps), what makes short
+      exposures costly on a real camera.
+    - `target`: ``"k"``, ``"gamma"`` or ``"both"`` (geometric mean of the two relative SEs).
+    - `current`: the user's design, ``[(frame_interval, exposure, n_frames), ...]``.
+    - `series`: numbers of exposures to try at a common frame interval (1 = single recording).
+
+    **Returns:** :class:`DesignResult` (``best``, ``predicted_se``, ``summary()``,
+    ``to_dict()``).
+    """
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}; got target = {target!r}")
+    ks = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
+    if len(ks) == 2:
+        ks = tuple(np.geomspace(ks[0], ks[1], 3))
+    for v in ks:
+        _check("k", v, unit="N/m")
+    temperature = _check("temperature", temperature, unit="K")
+    if gamma is None:
+        if radius is None:
+            raise ValueError("give gamma [N s/m] or the bead radius [m]")
+        eta = viscosity if viscosity is not None else float(water_viscosity(temperature))
+        gamma = 6.0 * math.pi * _check("viscosity", eta, unit="Pa s") * _check(
+            "radius", radius, unit="m")
+    gamma = _check("gamma", gamma, unit="N s/m")
+    dt_min = 1.0 / _check("max_fps", max_fps, unit="Hz")
+    if (n_frames is None) == (total_time is None):
+        raise ValueError("give exactly one of n_frames (per recording) or total_time [s]")
+    if n_frames is not None and (isinstance(n_frames, bool) or int(n_frames) != n_frames
+                                 or n_frames < 64):
+        raise ValueError(f"n_frames must be an integer >= 64; got n_frames = {n_frames!r}")
+    if total_time is not None:
+        _check("total_time", total_time, unit="s")
+    w_min = _check("min_exposure", min_exposure, unit="s")
+    if not (0.0 <= dead_time < dt_min - w_min):
+        raise ValueError(f"dead_time must be in [0, 1/max_fps - min_exposure) = [0, "
+                         f"{dt_min - w_min:.3g}) s; got dead_time = {dead_time!r}")
+    if tracking_std < 0 or not np.isfinite(tracking_std):
+        raise ValueError(f"tracking_std must be >= 0 [m]; got {tracking_std!r}")
+    if photon_limited and tracking_std == 0:
+        raise ValueError("photon_limited needs tracking_std > 0 at the reference exposure")
+    eps_ref2 = float(tracking_std) ** 2
+    w_ref = float(reference_exposure) if reference_exposure is not None else dt_min
+    common = (ks, gamma, temperature, eps_ref2, w_ref, bool(photon_limited), target)
+
+    def n_each(n_rec):
+        return total_time / dt_min / n_rec if total_time is not None else n_frames
+
+    cands = [_acquisition("W = dt at the fastest frame rate",
+                          [(dt_min, dt_min - dead_time, n_each(1))], *common),
+             _acquisition("the paper's exposure series",
+                          [(dt_min, max(w_min, f * (dt_min - dead_time)), n_each(4))
+                           for f in PAPER_SERIES], *common)]
+    if current is not None:
+        cur = [tuple(float(x) for x in r) for r in current]
+        for dt, w, n in cur:
+            if not (0 < w <= dt):
+                raise ValueError(f"current: each recording needs 0 < exposure <= frame "
+                                 f"interval; got ({dt}, {w}, {n})")
+        cands.append(_acquisition("your current design", cur, *common))
+    for n_exp in series:
+        if isinstance(n_exp, bool) or not isinstance(n_exp, (int, np.integer)) or n_exp < 1:
+            raise ValueError(f"series must hold whole numbers of exposures >= 1; got {n_exp!r}")
+        prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
+                        dead=jnp.asarray(float(dead_time)),
+                        budget=jnp.asarray(float(total_time if total_time is not None
+                                                 else n_frames)),
+                        ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
+                        temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
+                        w_ref=jnp.asarray(w_ref), n_exp=int(n_exp),
+                        total_time=total_time is not None, photon_limited=bool(photon_limited),
+                        target=target)
+        spread = np.linspace(-2.0, 2.0, n_exp) if n_exp > 1 else np.zeros(1)
+        starts = np.array([np.concatenate([[u0], spread + s0]) for u0 in (-6.0, 0.0, 2.0)
+                           for s0 in (-2.0, 2.0)])
+        us, vals = _minimise_all(prob, jnp.asarray(starts))
+        vals = np.asarray(vals)
+        if not np.isfinite(vals).any():
+            continue
+        best_u = us[int(np.argmin(vals))]
+        label = "optimised single recording" if n_exp == 1 else \
+            f"optimised series of {n_exp} exposures"
+        cands.append(_acquisition(label, prob.recs(best_u), *common))
+    cands.sort(key=lambda c: c.objective)
+    settings = {"gamma_N_s_per_m": gamma, "temperature_K": temperature, "max_fps_Hz": max_fps,
+                "min_exposure_s": w_min, "dead_time_s": dead_time, "n_frames": n_frames,
+                "total_time_s": total_time, "tracking_std_m": tracking_std,
+                "photon_limited": bool(photon_limited), "reference_exposure_s": w_ref,
+                "kT_J": BOLTZMANN * temperature}
+    return DesignResult(best=cands[0], candidates=tuple(cands), target=target, k=ks,
+                        settings=settings)
