@@ -28,16 +28,22 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .data import RecordingSet as RecordingSet
     from .data import from_arrays as from_arrays
     from .data import load as load
+    from .data import load_bluelake as load_bluelake
     from .data import load_csv as load_csv
+    from .data import load_h5 as load_h5
     from .data import load_manifest as load_manifest
     from .data import load_npz as load_npz
+    from .data import load_tdms as load_tdms
     from .data import save_manifest as save_manifest
     from .data import save_npz as save_npz
+    from .design import DesignResult as DesignResult
+    from .design import design as design
     from .diagnostics import Diagnosis as Diagnosis
     from .diagnostics import Selection as Selection
     from .diagnostics import compare as compare
     from .diagnostics import diagnose as diagnose
     from .diagnostics import select_model as select_model
+    from .inference import AllanVariance as AllanVariance
     from .inference import CalibrationResult as CalibrationResult
     from .inference import FitError as FitError
     from .inference import LogUniform as LogUniform
@@ -46,6 +52,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .inference import ShortChainWarning as ShortChainWarning
     from .inference import TrapModel as TrapModel
     from .inference import Uniform as Uniform
+    from .inference import allan_variance as allan_variance
     from .inference import calibrate as calibrate
     from .inference import calibrate_batch as calibrate_batch
     from .inference import sample_posterior as sample_posterior
@@ -107,6 +114,12 @@ _LAZY = {
     "RandomWalkDrift": "simulate", "SinusoidDrift": "simulate", "SubstepBiasWarning": "simulate",
     "TrackingNoise": "simulate", "TrapezoidProfile": "simulate", "quartic_force": "simulate",
     "simulate": "simulate",
+    # design
+    "design": "design", "DesignResult": "design",
+    # Allan variance
+    "allan_variance": "inference", "AllanVariance": "inference",
+    # instrument files
+    "load_bluelake": "data", "load_h5": "data", "load_tdms": "data",
 }
 # subpackages that ``import blurtrap`` used to make available as attributes
 _SUBMODULES = ("_config", "data", "diagnostics", "inference", "physics")
@@ -130,18 +143,23 @@ def __dir__():
     return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))
 
 
+# subpackages whose entry point has the package's name: the attribute is the function
+_FUNCTION_PACKAGES = ("simulate", "design")
+
+
 class _Package(_types.ModuleType):
-    """``blurtrap.simulate`` is the function, as it always was, although a subpackage of that
-    name exists: importing the subpackage (``import blurtrap.simulate``, or any module that
-    uses it) binds it as an attribute of this package, and this puts the function there."""
+    """``blurtrap.simulate`` (and ``blurtrap.design``) is the function, as it always was,
+    although a subpackage of that name exists: importing the subpackage (``import
+    blurtrap.simulate``, or any module that uses it) binds it as an attribute of this
+    package, and this puts the function there."""
 
     def __setattr__(self, name, value):
         if (
-            name == "simulate"
+            name in _FUNCTION_PACKAGES
             and isinstance(value, _types.ModuleType)
-            and value.__name__ == f"{__name__}.simulate"
+            and value.__name__ == f"{__name__}.{name}"
         ):
-            value = getattr(value, "simulate", value)
+            value = getattr(value, name, value)
         super().__setattr__(name, value)
 
 
