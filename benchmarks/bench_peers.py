@@ -80,6 +80,7 @@ BT_METHODS = {
     "blurtrap Whittle likelihood": dict(method="likelihood", likelihood="whittle"),
     "blurtrap blocked PSD": dict(method="psd"),
     "blurtrap naive equipartition": dict(method="equipartition"),
+    "blurtrap Allan variance": dict(method="allan"),
 }
 DEFAULT_PEER_PY = "/work/peervenv/bin/python"
 
