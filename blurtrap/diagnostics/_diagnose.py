@@ -225,6 +225,38 @@ def _plausible(name: str, params: dict, recs) -> tuple[bool, str]:
     return True, ""
 
 
+#: every name ``candidates`` may hold
+VALID_CANDIDATES = SPECTRAL_CANDIDATES + RELATION_CANDIDATES + ("anharmonicity",
+                                                                 "timing_jitter")
+
+
+def _check_alpha(alpha) -> float:
+    ok = isinstance(alpha, (int, float, np.integer, np.floating)) and not isinstance(
+        alpha, (bool, np.bool_))
+    a = float(alpha) if ok else math.nan
+    if not (math.isfinite(a) and 0.0 < a < 1.0):
+        raise ValueError(f"alpha (family-wise false-alarm rate) must be a number in (0, 1), "
+                         f"e.g. 0.05; got alpha = {alpha!r}")
+    return a
+
+
+def _check_candidates(candidates):
+    if candidates is None:
+        return None
+    if isinstance(candidates, str):
+        candidates = [candidates]
+    try:
+        names = list(candidates)
+    except TypeError:
+        raise ValueError(f"candidates must be a list of effect names from "
+                         f"{list(VALID_CANDIDATES)}; got {candidates!r}") from None
+    bad = [c for c in names if c not in VALID_CANDIDATES]
+    if bad:
+        raise ValueError(f"candidates: unknown effect name(s) {bad}; valid names are "
+                         f"{list(VALID_CANDIDATES)}")
+    return list(dict.fromkeys(names))
+
+
 @float64_scope
 def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str | None = None,
              add=()) -> Diagnosis:
@@ -241,7 +273,12 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
       power_offset / laser_heating are testable).
 
     **Returns:** :class:`Diagnosis` (``adequate``, ``gof``, ``ranking`` best first).
+
+    **Raises:** ``ValueError`` for an ``alpha`` outside (0, 1) or an unknown candidate name
+    (checked before any fit).
     """
+    alpha = _check_alpha(alpha)
+    candidates = _check_candidates(candidates)
     recs = as_recordings(data)
     mdl = get_model(model)
     if add:
@@ -427,6 +464,8 @@ def select_model(data, model=None, *, max_steps: int = 3, alpha: float = 0.05,
     """
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
         raise ValueError(f"max_steps must be an integer >= 1; got max_steps = {max_steps!r}")
+    alpha = _check_alpha(alpha)
+    candidates = _check_candidates(candidates)
     recs = as_recordings(data)
     mdl = get_model(model)
     steps, added, notes = [], [], []

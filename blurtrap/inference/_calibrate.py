@@ -648,6 +648,11 @@ def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pa
         if lo >= nyq:
             raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz starts above the Nyquist "
                              f"frequency {nyq:g} Hz of the recordings (f_range is in Hz, not kHz)")
+        if hi > nyq * (1.0 + 1e-9):
+            raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz: f_max = {hi:g} Hz is above the "
+                             f"Nyquist frequency fs/2 = {nyq:g} Hz of the recordings, where "
+                             "there are no ordinates; expected f_max <= fs/2 (f_range is in "
+                             "Hz, not kHz)")
         f_range = (lo, hi)
     if diffusion is not None:
         if method not in ("equipartition", "auto"):
