@@ -150,6 +150,56 @@ def temporal_information(rec, z_min=5.0):
     return bool(z > z_min), z
 
 
+#: a frame this many robust SDs (1.4826 x median absolute deviation) from the median is an
+#: outlier (a Gaussian trace of 1e7 frames reaches ~5.5)
+_OUTLIER_Z = 8.0
+
+
+def _outliers(rec):
+    """``(count, index, value, robust SDs)`` of frames more than ``_OUTLIER_Z`` robust SDs
+    from the median (count 0 when there are none)."""
+    y = np.asarray(rec.positions, dtype=float)
+    med = float(np.median(y))
+    mad = 1.4826 * float(np.median(np.abs(y - med)))
+    if not mad > 0:
+        return 0, 0, float(y[0]), 0.0
+    dev = np.abs(y - med) / mad
+    j = int(np.argmax(dev))
+    return int(np.sum(dev > _OUTLIER_Z)), j, float(y[j]), float(dev[j])
+
+
+def _robust_temporal_z(rec) -> float:
+    """The lag-1 statistic of :func:`temporal_information` with the frames clipped to the
+    median +- ``_OUTLIER_Z`` robust SDs: a few outliers dominate the variance and hide the
+    correlation of all other frames (identical to the plain statistic without outliers)."""
+    y = np.asarray(rec.positions, dtype=float)
+    med = float(np.median(y))
+    mad = 1.4826 * float(np.median(np.abs(y - med)))
+    if mad > 0:
+        y = np.clip(y, med - _OUTLIER_Z * mad, med + _OUTLIER_Z * mad)
+    y = y - y.mean()
+    if y.size < 8:
+        return 0.0
+    c0 = float(np.mean(y * y))
+    return float(np.mean(y[1:] * y[:-1])) / c0 * math.sqrt(y.size) if c0 > 0 else 0.0
+
+
+def _outlier_sentence(recs, z_min=5.0) -> str:
+    """A sentence on outliers that hide the lag correlation ('' when there are none)."""
+    for i, r in enumerate(recs):
+        n_out, j, val, dev = _outliers(r)
+        if n_out:
+            zr = _robust_temporal_z(r)
+            hides = (f"with them clipped the lag-1 correlation is {zr:.1f} standard errors "
+                     "above 0, so the frames do resolve the relaxation: remove the outliers "
+                     "(or the stretch around them) and fit again" if zr > z_min else
+                     "remove them (or the stretch around them)")
+            return (f"outliers: recording {i} has {n_out} frame(s) more than {_OUTLIER_Z:g} "
+                    f"robust SDs from its median (frame {j}: {val:.4g} m, {dev:.3g} SDs); "
+                    + hides)
+    return ""
+
+
 def _start_vector(recs, layout, noise, start=None):
     if start:
         missing = [n for n in layout.names if n not in start]
@@ -367,13 +417,59 @@ def _check_psd_blocks(res, recs, n_blocks, explicit):
     return res
 
 
+def _singular_fisher_causes(recs, values, names) -> str:
+    """What the data say about why a fit failed: dt >> tau only when the frames (outliers
+    clipped) really carry no temporal information; otherwise the outliers, steps or record
+    length seen in the data, or a neutral list of possible causes."""
+    if not recs:
+        return ("possible causes: outliers or steps in the trace, a parameter at its bound, "
+                "a wrong exposure or frame interval, or too short a record")
+    causes = []
+    zr = max(_robust_temporal_z(r) for r in recs)
+    dt = min(float(r.frame_interval) for r in recs)
+    tau = math.nan
+    if "gamma" in names and "k" in names:
+        tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
+    if zr < 5.0:
+        causes.append(f"dt >> tau: the lag-1 correlation of the frames is only {zr:.1f} "
+                      "standard errors above 0" + (f" (the fit ran tau = gamma/k to {tau:.3g} "
+                      f"s; dt = {dt:.3g} s)" if math.isfinite(tau) else "")
+                      + ", so there is little temporal information (use recordings at "
+                      "several exposures or powers)")
+    out = _outlier_sentence(recs)
+    if out:
+        causes.append(out)
+    for i, r in enumerate(recs):
+        seg = np.array_split(np.asarray(r.positions, dtype=float), 8)
+        if len(seg[-1]) < 8:
+            continue
+        meds = np.array([np.median(v) for v in seg])
+        # spread within the segments: a step does not inflate it
+        mad = 1.4826 * float(np.median([np.median(np.abs(v - m)) for v, m in zip(seg, meds)]))
+        jump = float(meds.max() - meds.min())
+        if mad > 0 and jump > 4.0 * mad:
+            causes.append(f"a step or drift: the median position of recording {i} moves by "
+                          f"{jump:.3g} m ({jump / mad:.2g} robust SDs) across the record")
+    n = min(r.n_frames for r in recs)
+    if n < 1000:
+        causes.append(f"a short record ({n} frames)")
+    if not causes:
+        return ("nothing in the frames points to one cause; possible causes: outliers or "
+                "steps in the trace, a parameter at its bound (e.g. eps^2 -> 0), a wrong "
+                "exposure or frame interval, or too short a record")
+    return "what the frames show: " + "; ".join(causes)
+
+
 def _check_fit(out, names, method, strict=True, notes=None, recs=None):
     hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
     if not bool(out.converged):
+        seen = _outlier_sentence(recs) if recs else ""
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
             f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
-            "Try another method or check the data (drift, wrong exposure/frame interval)."
+            + (f"The frames show {seen}." if seen else
+               "Try another method or check the data (outliers, drift, wrong exposure/frame "
+               "interval).")
             + hint
         )
     if not bool(out.hessian_pd):
@@ -382,10 +478,10 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None):
                 notes.append(f"{method}: the Fisher information is singular (a parameter at "
                              "its bound or unidentifiable): standard errors are NaN" + hint)
             return
+        why = _singular_fisher_causes(recs, np.asarray(out.value), names)
         raise FitError(
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
-            "not all identifiable from these data (e.g. dt >> tau leaves no temporal "
-            "information; use recordings at several exposures or powers)." + hint
+            f"not all identifiable from these data; {why}." + hint
         )
 
 
@@ -798,7 +894,8 @@ def _no_temporal_information_message(recs, info):
     best = max(z for _, z in info)
     v, se = empirical_variance_se(recs[0].positions)
     n = min(r.n_frames for r in recs)
-    why = (f"only {n} frames" if n < 200 else
+    out = _outlier_sentence(recs)
+    why = (out if out else f"only {n} frames" if n < 200 else
            "dt >> tau (the bead relaxes between frames), or tracking noise dominates the motion")
     return (
         f"these recordings cannot identify gamma: the lag-1 correlation of the frames is only "

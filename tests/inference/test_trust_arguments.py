@@ -1,5 +1,5 @@
-"""Bad arguments are refused before any fitting, with messages that name the parameter, the
-value and what was expected.
+"""Bad arguments are refused before any fitting, and failure messages blame what the data
+show (outliers) rather than a default cause (dt >> tau).
 
 Traces are built here with an exact AR(1) recursion plus white noise (independent of
 blurtrap's simulator).
@@ -15,6 +15,7 @@ from scipy.signal import lfilter
 
 import blurtrap as bt
 from blurtrap.diagnostics import _diagnose as diag_mod
+from blurtrap.inference import FitError
 from blurtrap.inference import _calibrate as cal_mod
 from blurtrap.inference import _posterior as post_mod
 
@@ -155,3 +156,64 @@ def test_traceable_user_priors_pass_the_check():
     post_mod._check_user_priors(
         (lambda p: jnp.log(p["k"]), lambda p: jnp.where(p["k"] > 1e-5, 0.0, -10.0),
          lambda p: 0.0), names)
+
+
+# ------------------------------------------------------------------------------------------
+# failure messages name what the data show
+# ------------------------------------------------------------------------------------------
+def _with_outliers(n_out, amp=200.0, seed=0):
+    x, sig = _trace(seed=seed)
+    x = x.copy()
+    x[np.arange(n_out) * 300 + 100] += amp * sig
+    return _rec(x)
+
+
+def test_outliers_are_not_blamed_on_dt_much_larger_than_tau():
+    """10 outliers of 200 SD break the exact fit (singular Fisher information, or no
+    convergence); the frames without them resolve tau well (lag-1 correlation ~15 SE), so the
+    message names the outliers and does not blame dt >> tau."""
+    with pytest.raises(FitError, match="Fisher information is singular|did not converge") \
+            as err:
+        bt.calibrate(_with_outliers(10), method="likelihood", likelihood="exact")
+    msg = str(err.value)
+    assert "dt >> tau" not in msg
+    assert "outliers: recording 0 has 10 frame(s) more than 8 robust SDs" in msg
+    assert "remove the outliers" in msg
+
+
+@pytest.mark.parametrize("n_out", [1, 3])
+def test_auto_names_outliers_that_hide_the_lag_correlation(n_out):
+    with pytest.raises(FitError, match="cannot identify gamma") as err:
+        bt.calibrate(_with_outliers(n_out))
+    msg = str(err.value)
+    assert "dt >> tau" not in msg
+    assert f"{n_out} frame(s) more than 8 robust SDs" in msg and "remove the outliers" in msg
+
+
+def test_non_convergence_names_the_outliers():
+    with pytest.raises(FitError, match="did not converge") as err:
+        bt.calibrate(_with_outliers(3), method="likelihood", likelihood="exact")
+    assert "outliers: recording 0 has 3 frame(s)" in str(err.value)
+
+
+def test_dt_much_larger_than_tau_is_still_named_when_true():
+    """White frames (tau = dt/100): the message does blame dt >> tau."""
+    x, _ = _trace(k=5e-3, seed=4)
+    with pytest.raises(FitError, match="Fisher information is singular") as err:
+        bt.calibrate(_rec(x), method="likelihood", likelihood="exact")
+    msg = str(err.value)
+    assert "dt >> tau" in msg and "outliers" not in msg
+
+
+def test_clean_informative_trace_gets_a_neutral_list():
+    x, _ = _trace(seed=5)
+    why = cal_mod._singular_fisher_causes([_rec(x)], np.array([5e-5, GAMMA, 1e-18]),
+                                          ("k", "gamma", "tracking_var"))
+    assert "dt >> tau" not in why and "outliers:" not in why
+    assert "possible causes" in why and "outliers or steps" in why
+    # a step of the trap centre is named
+    y = x.copy()
+    y[N // 2:] += 20 * float(np.std(x))
+    why = cal_mod._singular_fisher_causes([_rec(y)], np.array([5e-5, GAMMA, 1e-18]),
+                                          ("k", "gamma", "tracking_var"))
+    assert "a step or drift" in why and "dt >> tau" not in why
