@@ -963,12 +963,74 @@ def calibrate(
     mdl: TrapModel = get_model(model)
     n_blocks, f_range = _check_options(recs, method, likelihood, k, n_blocks, f_range,
                                        diffusion, pade, start, strict)
+    radii = _bead_radii(recs)
     data_notes = tuple(_inspect_frames(recs, bool(strict)))
     res = _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade,
                      start, strict)
+    data_notes += tuple(_stokes_notes(recs, radii, res))
     if data_notes:
         res = dataclasses.replace(res, notes=tuple(res.notes) + data_notes)
     return res
+
+
+#: a fitted gamma outside [1/3, 3] x the Stokes friction of the known bead is flagged
+_STOKES_MAX_RATIO = 3.0
+
+
+def _bead_radii(recs) -> list:
+    """``metadata['bead_radius_m']`` (and optional ``'viscosity_Pa_s'``) per recording, as
+    ``(radius, viscosity or None)`` or ``None``; a value that is not a plausible radius in
+    metres is a ValueError."""
+    out = []
+    for i, r in enumerate(recs):
+        meta = getattr(r, "metadata", None) or {}
+        rad = meta.get("bead_radius_m")
+        if rad is None:
+            out.append(None)
+            continue
+        ok = isinstance(rad, numbers.Real) and not isinstance(rad, bool) and \
+            math.isfinite(rad) and rad > 0
+        if not ok:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] must be a bead radius "
+                             f"in m (> 0, finite); got {rad!r}")
+        if rad > 1e-3:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] = {rad!r} m is "
+                             f"implausibly large: it looks like um or nm (1 um = 1e-6 m)")
+        eta = meta.get("viscosity_Pa_s")
+        if eta is not None and not (isinstance(eta, numbers.Real) and not isinstance(eta, bool)
+                                    and math.isfinite(eta) and eta > 0):
+            raise ValueError(f"recording {i}: metadata['viscosity_Pa_s'] must be > 0 (Pa s); "
+                             f"got {eta!r}")
+        out.append((float(rad), None if eta is None else float(eta)))
+    return out
+
+
+def _stokes_notes(recs, radii, res) -> list:
+    """A note when the fitted gamma is far from Stokes' 6 pi eta r of the known bead."""
+    from ..physics._effects import water_viscosity
+
+    g = float(res.gamma)
+    if not (math.isfinite(g) and g > 0) or res.method == "equipartition":
+        return []
+    for i, (r, ri) in enumerate(zip(recs, radii)):
+        if ri is None:
+            continue
+        rad, eta = ri
+        t = float(r.temperature)
+        which = "metadata viscosity_Pa_s" if eta is not None else f"water at {t:g} K"
+        eta = eta if eta is not None else float(water_viscosity(t))
+        g0 = 6.0 * math.pi * eta * rad
+        ratio = g / g0
+        if 1.0 / _STOKES_MAX_RATIO <= ratio <= _STOKES_MAX_RATIO:
+            return []
+        return [f"gamma = {g:.4g} N s/m is {ratio:.3g} x the Stokes friction 6 pi eta r = "
+                f"{g0:.4g} N s/m of the bead (r = {rad:.4g} m from recording {i}'s metadata "
+                f"bead_radius_m, eta = {eta:.4g} Pa s, {which}); expected within "
+                f"{1 / _STOKES_MAX_RATIO:.2g}-{_STOKES_MAX_RATIO:g} x (a nearby surface raises "
+                "it by Faxen's factor, < 3 x above ~1.1 radii). Check the position "
+                "calibration (units), the exposure and frame interval, the bead radius and "
+                "the temperature"]
+    return []
 
 
 def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,
