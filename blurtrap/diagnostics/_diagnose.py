@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from .._config import float64_scope
-from ..inference._calibrate import as_recordings, calibrate, screen_model
+from ..inference._calibrate import _inspect_frames, as_recordings, calibrate, screen_model
 from ..inference._fit import chi2_sf
 from ..inference._models import get_model
 from ..inference._result import CalibrationResult, FitError
@@ -274,12 +274,15 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
 
     **Returns:** :class:`Diagnosis` (``adequate``, ``gof``, ``ranking`` best first).
 
-    **Raises:** ``ValueError`` for an ``alpha`` outside (0, 1) or an unknown candidate name
-    (checked before any fit).
+    **Raises:** ``ValueError`` for an ``alpha`` outside (0, 1), an unknown candidate name,
+    or saturated or coarsely quantised frames (checked before any fit).
     """
     alpha = _check_alpha(alpha)
     candidates = _check_candidates(candidates)
     recs = as_recordings(data)
+    # saturated or coarsely quantised frames: refused here as by calibrate (the base fit
+    # runs with strict=False, which would only note them)
+    _inspect_frames(recs, strict=True)
     mdl = get_model(model)
     if add:
         mdl = mdl.add(*add)

@@ -140,3 +140,18 @@ def test_fine_quantisation_is_silent(x):
     # in nm units with a resolution of 1e-3 nm: also silent
     res = bt.calibrate(_rec(np.round(x * 1e12) * 1e-12), method="equipartition")
     assert not any("quantised" in n or "saturated" in n for n in res.notes)
+
+
+def test_diagnose_refuses_saturated_frames_before_fitting(x, monkeypatch):
+    """diagnose fits its base model with strict=False (which only notes): it checks the frames
+    itself, before any fit."""
+    from blurtrap.diagnostics import _diagnose
+
+    def no_fit(*a, **kw):
+        raise AssertionError("fitted saturated data")
+
+    monkeypatch.setattr(_diagnose, "calibrate", no_fit)
+    with pytest.raises(ValueError, match="saturated"):
+        bt.diagnose(_rec(_clip(x, 0.02, 0.98)))
+    with pytest.raises(ValueError, match="quantised in steps"):
+        bt.diagnose(_rec(np.round(x / (2 * SIG)) * 2 * SIG))
