@@ -19,6 +19,35 @@ _K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 
 
 
+def _finite_or_none(obj):
+    """A copy of ``obj`` that strict JSON can hold: non-finite floats become ``None`` (JSON
+    has no NaN or Infinity; Python's json would print bare ``NaN`` literals, which strict
+    parsers reject), NumPy scalars and arrays become Python numbers and lists."""
+    if isinstance(obj, dict):
+        return {str(k) if not isinstance(k, str) else k: _finite_or_none(v)
+                for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, (str, bool)) or obj is None:
+        return obj
+    if isinstance(obj, int):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    tolist = getattr(obj, "tolist", None)  # NumPy / JAX scalars and arrays
+    if callable(tolist):
+        return _finite_or_none(tolist())
+    try:
+        return _finite_or_none(float(obj))
+    except (TypeError, ValueError):
+        return str(obj)
+
+
+def dumps_json(obj) -> str:
+    """One line of strict JSON (RFC 8259): non-finite floats are written as ``null``."""
+    return json.dumps(_finite_or_none(obj), allow_nan=False)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (``blurtrap <cmd>: error: ...``, exit 2)."""
 
@@ -28,6 +57,22 @@ class _Parser(argparse.ArgumentParser):
 
 class CliError(Exception):
     """A user error with a message that needs no traceback."""
+
+
+def _int_at_least(low: int, even: bool = False):
+    """argparse type: an integer >= ``low`` (and even), checked before any work is done."""
+
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer; got {text!r}") from None
+        if v < low or (even and v % 2):
+            raise argparse.ArgumentTypeError(
+                f"must be {'an even' if even else 'an'} integer >= {low}; got {v}")
+        return v
+
+    return parse
 
 
 def _add_debug(p):
@@ -112,10 +157,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "fallback of --method auto when frames carry no temporal information")
     c.add_argument("--posterior", action="store_true",
                    help="also sample the posterior with emcee (medians, 68 %%/95 %% intervals)")
-    c.add_argument("--steps", type=int, default=2000, metavar="N",
-                   help="emcee steps for --posterior (default 2000)")
-    c.add_argument("--walkers", type=int, default=32, metavar="N",
-                   help="emcee walkers for --posterior (default 32)")
+    c.add_argument("--steps", type=_int_at_least(10), default=2000, metavar="N",
+                   help="emcee steps for --posterior (>= 10; default 2000)")
+    c.add_argument("--walkers", type=_int_at_least(2, even=True), default=32, metavar="N",
+                   help="emcee walkers for --posterior (even, >= 2 x the number of "
+                   "parameters; default 32)")
     c.add_argument("--json", action="store_true",
                    help="print the result as one JSON object (SI units, to_dict())")
     _add_debug(c)
@@ -203,7 +249,7 @@ def _simulate(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     written = save_manifest(RecordingSet(recs), out / "manifest.json", "nm")
     if args.json:
-        print(json.dumps({"manifest": str(written[0]), "files": [str(p) for p in written[1:]],
+        print(dumps_json({"manifest": str(written[0]), "files": [str(p) for p in written[1:]],
                           "n_recordings": len(recs), "n_frames": args.frames,
                           "gamma_pN_s_per_um": gamma * 1e6,
                           "k_pN_per_nm": list(args.k), "exposure_ms": list(args.exposure_ms),
@@ -269,7 +315,7 @@ def _calibrate(args) -> int:
         out = result.to_dict()
         if post is not None:
             out["posterior"] = post.to_dict()
-        print(json.dumps(out))
+        print(dumps_json(out))
     else:
         print(format_result(result))
         if post is not None:
@@ -289,7 +335,7 @@ def _diagnose(args) -> int:
         out = d.to_dict()
         out["gof"] = {k: out["gof"][k] for k in ("statistic", "dof", "p_value")}
         out["gof"]["p"] = out["gof"]["p_value"]
-        print(json.dumps(out, default=float))
+        print(dumps_json(out))
     else:
         print(d.summary())
     return 0  # a diagnosis was made; adequacy is in the output
@@ -320,7 +366,19 @@ def main(argv=None) -> int:
             matplotlib.use("Agg")  # files only: never a GUI window from the command line
             from ._demo import run_demo
 
-            return run_demo(args)
+            if not getattr(args, "json", False):
+                return run_demo(args)
+            # the demo prints Python's json (NaN literals for e.g. the naive gamma): re-emit
+            # it as strict JSON
+            import contextlib
+            import io
+
+            buf = io.StringIO()
+            with contextlib.redirect_stdout(buf):
+                rc = run_demo(args)
+            for line in buf.getvalue().splitlines():
+                print(dumps_json(json.loads(line)) if line.startswith("{") else line)
+            return rc
         if args.command == "simulate":
             return _simulate(args)
         if args.command == "calibrate":

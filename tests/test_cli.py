@@ -258,6 +258,13 @@ CLI_BAD_INPUTS = [
      "diffusion"),
     (["calibrate", "{tmp}/sim/manifest.json", "--k-mode", "linear_power"], "laser_power"),
     (["diagnose", "{tmp}/sim/manifest.json", "--add", "nonsense"], "unknown effect"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "100", "5000"],
+     "f_max = 5000 Hz is above the Nyquist"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--method", "psd", "--f-range", "0", "750.5"],
+     "above the Nyquist"),
+    (["diagnose", "{tmp}/sim/manifest.json", "--alpha", "1.5"], "alpha .* 1.5"),
+    (["diagnose", "{tmp}/sim/manifest.json", "--alpha", "-1"], "alpha .* -1"),
+    (["diagnose", "{tmp}/sim/manifest.json", "--alpha", "nan"], "alpha .* nan"),
     (["simulate", "--k", "-1", "--radius", "1", "--exposure-ms", "0.5", "--out", "{tmp}/o"],
      "--k must be > 0"),
     (["simulate", "--k", "0.05", "--radius", "-1", "--exposure-ms", "0.5", "--out", "{tmp}/o"],
@@ -290,3 +297,106 @@ def test_cli_bad_inputs_give_one_clear_line(bad_input_dir, capsys, argv, match):
     assert main(argv) == 1
     line = _one_error_line(capsys.readouterr().err, argv[0])
     assert re.search(match, line), line
+
+
+# ------------------------------------------------------------------------------------------
+# strict JSON: non-finite floats are null (JSON has no NaN; bare NaN literals break parsers)
+# ------------------------------------------------------------------------------------------
+def _strict_json(text):
+    def reject(const):
+        raise ValueError(f"non-standard JSON constant {const}")
+
+    return json.loads(text, parse_constant=reject)
+
+
+def test_calibrate_json_is_strict_with_nan_values(bad_input_dir, capsys):
+    """Naive equipartition has no gamma (NaN before: a bare NaN literal); it prints null.
+    The standard fit of a trace without tracking noise (eps^2 at its bound) stays strict."""
+    manifest = str(bad_input_dir / "sim" / "manifest.json")
+    capsys.readouterr()
+    assert main(["calibrate", manifest, "--method", "equipartition", "--json"]) == 0
+    res = _strict_json(capsys.readouterr().out)
+    assert res["gamma"] is None and res["diffusion"] is None and res["k"] > 0
+    assert main(["calibrate", manifest, "--json"]) == 0
+    res = _strict_json(capsys.readouterr().out)
+    assert "tracking_var" in res["at_bounds"]
+    assert res["k"] > 0 and res["k_err"] > 0
+
+
+def test_simulate_json_is_strict(tmp_path, capsys):
+    assert main(["simulate", "--k", "0.05", "--radius", "0.765", "--exposure-ms", "0.5",
+                 "--frames", "64", "--out", str(tmp_path / "s"), "--json"]) == 0
+    assert _strict_json(capsys.readouterr().out)["n_recordings"] == 1
+
+
+def test_diagnose_json_is_strict(bad_input_dir, capsys, monkeypatch):
+    import blurtrap.diagnostics as diag
+
+    class _Stub:
+        def to_dict(self):
+            return {"adequate": False, "gof": {"statistic": float("nan"), "dof": 3,
+                                                "p_value": float("inf")},
+                    "ranking": [{"effect": "drift", "delta_aic": float("-inf")}],
+                    "fit": {"gamma_err": float("nan"), "k": 1e-5}}
+
+    monkeypatch.setattr(diag, "diagnose", lambda *a, **kw: _Stub())
+    capsys.readouterr()
+    assert main(["diagnose", str(bad_input_dir / "sim" / "manifest.json"), "--json"]) == 0
+    d = _strict_json(capsys.readouterr().out)
+    assert d["gof"] == {"statistic": None, "dof": 3, "p_value": None, "p": None}
+    assert d["ranking"][0]["delta_aic"] is None and d["fit"]["gamma_err"] is None
+
+
+def test_demo_json_is_strict(tmp_path, capsys, monkeypatch):
+    import numpy as np
+
+    from blurtrap import _demo
+
+    def fake_demo(out, quick=False, quiet=False, seed=0, **kw):
+        return {"ok": True, "table": "t", "steps": [], "report": str(out),
+                "figures": [], "runtime_s": 1.0, "posterior": "x",
+                "naive": {"gamma": float("nan"), "k": np.float64(1e-5),
+                          "errs": [np.nan, 2.0]}}
+
+    monkeypatch.setattr(_demo, "demo", fake_demo)
+    assert main(["demo", "--json", "--out", str(tmp_path)]) == 0
+    out = _strict_json(capsys.readouterr().out)
+    assert out["naive"] == {"gamma": None, "k": 1e-5, "errs": [None, 2.0]}
+
+
+def test_dumps_json_strict_for_every_kind_of_value():
+    import numpy as np
+
+    from blurtrap.cli import dumps_json
+
+    obj = {"a": float("nan"), "b": [float("inf"), -float("inf"), 1.5], "c": np.nan,
+           "d": np.array([[1.0, np.nan]]), "e": np.float32("nan"), "f": (np.int64(3), True),
+           "g": None, "h": "NaN"}
+    assert _strict_json(dumps_json(obj)) == {"a": None, "b": [None, None, 1.5], "c": None,
+                                             "d": [[1.0, None]], "e": None, "f": [3, True],
+                                             "g": None, "h": "NaN"}
+
+
+# ------------------------------------------------------------------------------------------
+# arguments checked before any fitting
+# ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("argv,match", [
+    (["--posterior", "--steps", "0"], "--steps: must be an integer >= 10; got 0"),
+    (["--posterior", "--steps", "-5"], "--steps"),
+    (["--posterior", "--steps", "ten"], "--steps: must be an integer"),
+    (["--posterior", "--walkers", "7"], "--walkers: must be an even integer"),
+    (["--posterior", "--walkers", "0"], "--walkers"),
+])
+def test_posterior_arguments_rejected_before_fitting(bad_input_dir, capsys, monkeypatch, argv,
+                                                     match):
+    import blurtrap.inference as inf
+
+    def boom(*a, **kw):
+        raise AssertionError("calibrate ran before the arguments were checked")
+
+    monkeypatch.setattr(inf, "calibrate", boom)
+    monkeypatch.setattr(inf, "sample_posterior", boom)
+    capsys.readouterr()
+    rc = main(["calibrate", str(bad_input_dir / "sim" / "manifest.json"), *argv])
+    assert rc == 2
+    assert re.search(match, capsys.readouterr().err)

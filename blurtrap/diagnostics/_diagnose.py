@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from .._config import float64_scope
-from ..inference._calibrate import as_recordings, calibrate, screen_model
+from ..inference._calibrate import _inspect_frames, as_recordings, calibrate, screen_model
 from ..inference._fit import chi2_sf
 from ..inference._models import get_model
 from ..inference._result import CalibrationResult, FitError
@@ -298,6 +298,38 @@ def _sensitivity_notes(base: CalibrationResult, ranked, screened) -> list[str]:
     return out
 
 
+#: every name ``candidates`` may hold
+VALID_CANDIDATES = SPECTRAL_CANDIDATES + RELATION_CANDIDATES + ("anharmonicity",
+                                                                 "timing_jitter") + tuple(COUPLED_GROUPS)
+
+
+def _check_alpha(alpha) -> float:
+    ok = isinstance(alpha, (int, float, np.integer, np.floating)) and not isinstance(
+        alpha, (bool, np.bool_))
+    a = float(alpha) if ok else math.nan
+    if not (math.isfinite(a) and 0.0 < a < 1.0):
+        raise ValueError(f"alpha (family-wise false-alarm rate) must be a number in (0, 1), "
+                         f"e.g. 0.05; got alpha = {alpha!r}")
+    return a
+
+
+def _check_candidates(candidates):
+    if candidates is None:
+        return None
+    if isinstance(candidates, str):
+        candidates = [candidates]
+    try:
+        names = list(candidates)
+    except TypeError:
+        raise ValueError(f"candidates must be a list of effect names from "
+                         f"{list(VALID_CANDIDATES)}; got {candidates!r}") from None
+    bad = [c for c in names if c not in VALID_CANDIDATES]
+    if bad:
+        raise ValueError(f"candidates: unknown effect name(s) {bad}; valid names are "
+                         f"{list(VALID_CANDIDATES)}")
+    return list(dict.fromkeys(names))
+
+
 @float64_scope
 def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str | None = None,
              add=()) -> Diagnosis:
@@ -314,8 +346,16 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
       power_offset / laser_heating are testable).
 
     **Returns:** :class:`Diagnosis` (``adequate``, ``gof``, ``ranking`` best first).
+
+    **Raises:** ``ValueError`` for an ``alpha`` outside (0, 1), an unknown candidate name,
+    or saturated or coarsely quantised frames (checked before any fit).
     """
+    alpha = _check_alpha(alpha)
+    candidates = _check_candidates(candidates)
     recs = as_recordings(data)
+    # saturated or coarsely quantised frames: refused here as by calibrate (the base fit
+    # runs with strict=False, which would only note them)
+    _inspect_frames(recs, strict=True)
     mdl = get_model(model)
     if add:
         mdl = mdl.add(*add)
@@ -505,6 +545,8 @@ def select_model(data, model=None, *, max_steps: int = 3, alpha: float = 0.05,
     """
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
         raise ValueError(f"max_steps must be an integer >= 1; got max_steps = {max_steps!r}")
+    alpha = _check_alpha(alpha)
+    candidates = _check_candidates(candidates)
     recs = as_recordings(data)
     mdl = get_model(model)
     steps, added, notes = [], [], []

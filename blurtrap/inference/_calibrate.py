@@ -151,6 +151,56 @@ def temporal_information(rec, z_min=5.0):
     return bool(z > z_min), z
 
 
+#: a frame this many robust SDs (1.4826 x median absolute deviation) from the median is an
+#: outlier (a Gaussian trace of 1e7 frames reaches ~5.5)
+_OUTLIER_Z = 8.0
+
+
+def _outliers(rec):
+    """``(count, index, value, robust SDs)`` of frames more than ``_OUTLIER_Z`` robust SDs
+    from the median (count 0 when there are none)."""
+    y = np.asarray(rec.positions, dtype=float)
+    med = float(np.median(y))
+    mad = 1.4826 * float(np.median(np.abs(y - med)))
+    if not mad > 0:
+        return 0, 0, float(y[0]), 0.0
+    dev = np.abs(y - med) / mad
+    j = int(np.argmax(dev))
+    return int(np.sum(dev > _OUTLIER_Z)), j, float(y[j]), float(dev[j])
+
+
+def _robust_temporal_z(rec) -> float:
+    """The lag-1 statistic of :func:`temporal_information` with the frames clipped to the
+    median +- ``_OUTLIER_Z`` robust SDs: a few outliers dominate the variance and hide the
+    correlation of all other frames (identical to the plain statistic without outliers)."""
+    y = np.asarray(rec.positions, dtype=float)
+    med = float(np.median(y))
+    mad = 1.4826 * float(np.median(np.abs(y - med)))
+    if mad > 0:
+        y = np.clip(y, med - _OUTLIER_Z * mad, med + _OUTLIER_Z * mad)
+    y = y - y.mean()
+    if y.size < 8:
+        return 0.0
+    c0 = float(np.mean(y * y))
+    return float(np.mean(y[1:] * y[:-1])) / c0 * math.sqrt(y.size) if c0 > 0 else 0.0
+
+
+def _outlier_sentence(recs, z_min=5.0) -> str:
+    """A sentence on outliers that hide the lag correlation ('' when there are none)."""
+    for i, r in enumerate(recs):
+        n_out, j, val, dev = _outliers(r)
+        if n_out:
+            zr = _robust_temporal_z(r)
+            hides = (f"with them clipped the lag-1 correlation is {zr:.1f} standard errors "
+                     "above 0, so the frames do resolve the relaxation: remove the outliers "
+                     "(or the stretch around them) and fit again" if zr > z_min else
+                     "remove them (or the stretch around them)")
+            return (f"outliers: recording {i} has {n_out} frame(s) more than {_OUTLIER_Z:g} "
+                    f"robust SDs from its median (frame {j}: {val:.4g} m, {dev:.3g} SDs); "
+                    + hides)
+    return ""
+
+
 def _start_vector(recs, layout, noise, start=None):
     if start:
         missing = [n for n in layout.names if n not in start]
@@ -368,13 +418,59 @@ def _check_psd_blocks(res, recs, n_blocks, explicit):
     return res
 
 
+def _singular_fisher_causes(recs, values, names) -> str:
+    """What the data say about why a fit failed: dt >> tau only when the frames (outliers
+    clipped) really carry no temporal information; otherwise the outliers, steps or record
+    length seen in the data, or a neutral list of possible causes."""
+    if not recs:
+        return ("possible causes: outliers or steps in the trace, a parameter at its bound, "
+                "a wrong exposure or frame interval, or too short a record")
+    causes = []
+    zr = max(_robust_temporal_z(r) for r in recs)
+    dt = min(float(r.frame_interval) for r in recs)
+    tau = math.nan
+    if "gamma" in names and "k" in names:
+        tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
+    if zr < 5.0:
+        causes.append(f"dt >> tau: the lag-1 correlation of the frames is only {zr:.1f} "
+                      "standard errors above 0" + (f" (the fit ran tau = gamma/k to {tau:.3g} "
+                      f"s; dt = {dt:.3g} s)" if math.isfinite(tau) else "")
+                      + ", so there is little temporal information (use recordings at "
+                      "several exposures or powers)")
+    out = _outlier_sentence(recs)
+    if out:
+        causes.append(out)
+    for i, r in enumerate(recs):
+        seg = np.array_split(np.asarray(r.positions, dtype=float), 8)
+        if len(seg[-1]) < 8:
+            continue
+        meds = np.array([np.median(v) for v in seg])
+        # spread within the segments: a step does not inflate it
+        mad = 1.4826 * float(np.median([np.median(np.abs(v - m)) for v, m in zip(seg, meds)]))
+        jump = float(meds.max() - meds.min())
+        if mad > 0 and jump > 4.0 * mad:
+            causes.append(f"a step or drift: the median position of recording {i} moves by "
+                          f"{jump:.3g} m ({jump / mad:.2g} robust SDs) across the record")
+    n = min(r.n_frames for r in recs)
+    if n < 1000:
+        causes.append(f"a short record ({n} frames)")
+    if not causes:
+        return ("nothing in the frames points to one cause; possible causes: outliers or "
+                "steps in the trace, a parameter at its bound (e.g. eps^2 -> 0), a wrong "
+                "exposure or frame interval, or too short a record")
+    return "what the frames show: " + "; ".join(causes)
+
+
 def _check_fit(out, names, method, strict=True, notes=None, recs=None):
     hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
     if not bool(out.converged):
+        seen = _outlier_sentence(recs) if recs else ""
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
             f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
-            "Try another method or check the data (drift, wrong exposure/frame interval)."
+            + (f"The frames show {seen}." if seen else
+               "Try another method or check the data (outliers, drift, wrong exposure/frame "
+               "interval).")
             + hint
         )
     if not bool(out.hessian_pd):
@@ -383,10 +479,10 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None):
                 notes.append(f"{method}: the Fisher information is singular (a parameter at "
                              "its bound or unidentifiable): standard errors are NaN" + hint)
             return
+        why = _singular_fisher_causes(recs, np.asarray(out.value), names)
         raise FitError(
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
-            "not all identifiable from these data (e.g. dt >> tau leaves no temporal "
-            "information; use recordings at several exposures or powers)." + hint
+            f"not all identifiable from these data; {why}." + hint
         )
 
 
@@ -670,6 +766,11 @@ def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pa
         if lo >= nyq:
             raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz starts above the Nyquist "
                              f"frequency {nyq:g} Hz of the recordings (f_range is in Hz, not kHz)")
+        if hi > nyq * (1.0 + 1e-9):
+            raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz: f_max = {hi:g} Hz is above the "
+                             f"Nyquist frequency fs/2 = {nyq:g} Hz of the recordings, where "
+                             "there are no ordinates; expected f_max <= fs/2 (f_range is in "
+                             "Hz, not kHz)")
         f_range = (lo, hi)
     if diffusion is not None:
         if method not in ("equipartition", "auto"):
@@ -702,11 +803,121 @@ def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pa
     return n_blocks, f_range
 
 
+#: saturation: a pile-up of at least this many frames at exactly the minimum or maximum value
+#: that holds more than twice as many frames as the next value inwards (an unclipped tail
+#: thins out towards the extreme: a continuous trace has each value once, a quantised one
+#: fewer frames on its outermost level than on the next)
+_SAT_MIN_FRAMES = 3
+#: refuse above this fraction of saturated frames, or when the clipped tails lower the
+#: variance by more than _SAT_MAX_BIAS_SE standard errors of the frame variance
+_SAT_MAX_FRACTION = 0.005
+_SAT_MAX_BIAS_SE = 0.5
+#: quantisation: note a step above std/4 (it adds step^2/12 > 0.5 % of the variance); refuse a
+#: step above the std. Below one std the rounding error is white noise of variance step^2/12,
+#: uncorrelated with the motion to exp(-2 pi^2 std^2/step^2) (Sheppard; < 3e-9 at step = std),
+#: which eps^2 absorbs: measured with the exact likelihood on 8192-frame AR(1) traces rounded
+#: to steps of 0.25, 0.5 and 1 std, k and gamma moved by < 0.4 SE. At 1.5 and 2 std they were
+#: 1.5 and 3-8 SE off (tau = 8 dt: the rounding error of neighbouring frames correlates).
+_QUANT_NOTE_STEP = 0.25
+_QUANT_MAX_STEP = 1.0
+
+
+def _clipped_variance_deficit(p: float) -> float:
+    """Relative variance lost when a Gaussian's tail beyond its upper p-quantile is moved onto
+    the quantile: ``E[(Z - z)^2; Z > z] = (1 + z^2) Q(z) - z phi(z)``."""
+    from statistics import NormalDist
+
+    p = min(max(p, 1e-300), 0.5)
+    z = NormalDist().inv_cdf(1.0 - p)
+    phi = math.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
+    return max((1.0 + z * z) * p - z * phi, 0.0)
+
+
+def _quantisation_step(values: np.ndarray, n: int) -> float:
+    """The grid step of a trace whose values lie on a regular grid (else 0)."""
+    if values.size < 2 or values.size > n // 2:
+        return 0.0
+    d = np.diff(values)
+    q = float(d.min())
+    if not q > 0:
+        return 0.0
+    m = d / q
+    return q if bool(np.all(np.abs(m - np.round(m)) < 1e-3)) else 0.0
+
+
+def _inspect_frames(recs, strict: bool) -> list:
+    """Saturation (frames piled up at exactly the extreme values) and coarse quantisation.
+
+    Clipping removes the tails of the position distribution and flattens the trace while the
+    detector is saturated: k comes out high and the spectrum distorted, with no sign in the
+    goodness of fit. Refused (``ValueError``) above ``_SAT_MAX_FRACTION`` of the frames or
+    when the variance deficit it implies is not small compared with the variance's standard
+    error; smaller pile-ups get a note. Quantisation adds white noise of variance step^2/12,
+    which the tracking-noise term absorbs: a note above a step of std/4, refused above one
+    std, where the rounding error is neither white nor independent of the motion. With
+    ``strict=False`` the refusals become notes and the fit goes on.
+    """
+    notes, errors = [], []
+    for i, r in enumerate(recs):
+        y = np.asarray(r.positions, dtype=float)
+        n = y.size
+        u, counts = np.unique(y, return_counts=True)
+        if u.size < 2:
+            continue
+        sd = float(np.std(y))
+        where = f"recording {i}" + (f" ({r.name})" if getattr(r, "name", None) else "")
+        piles = []
+        for side, j, jn in (("minimum", 0, 1), ("maximum", -1, -2)):
+            c, cn = int(counts[j]), int(counts[jn])
+            if c >= _SAT_MIN_FRAMES and c >= 2 * cn + 1:
+                piles.append((side, c, float(u[j])))
+        if piles:
+            frac = sum(c for _, c, _ in piles) / n
+            deficit = sum(_clipped_variance_deficit(c / n) for _, c, _ in piles)
+            v, se = empirical_variance_se(y)
+            rel_se = se / v if v > 0 else math.inf
+            what = " and ".join(f"{c} frames ({100.0 * c / n:.2g} %) at exactly the {side} "
+                                f"{val:.6g} m" for side, c, val in piles)
+            msg = (f"{where} ({n} frames): {what}: the detector saturated (clipped). "
+                   "Clipping cuts the tails of the position distribution and flattens the "
+                   "trace while saturated, so k comes out too high (a Gaussian clipped there "
+                   f"loses ~{100.0 * deficit:.2g} % of its variance; the variance's standard "
+                   f"error is {100.0 * rel_se:.2g} %) and the spectrum is distorted")
+            if frac > _SAT_MAX_FRACTION or deficit > _SAT_MAX_BIAS_SE * rel_se:
+                errors.append(msg)
+            else:
+                notes.append(msg + " - here too few frames to matter (fit kept)")
+        q = _quantisation_step(u, n)
+        if q > 0 and sd > 0 and q > _QUANT_NOTE_STEP * sd:
+            added = q * q / 12.0
+            msg = (f"{where}: positions are quantised in steps of {q:.4g} m ({q / sd:.2g} x "
+                   f"their standard deviation {sd:.4g} m; {u.size} distinct values). Rounding "
+                   f"adds white noise of variance step^2/12 = {added:.3g} m^2 "
+                   f"({100.0 * added / sd**2:.2g} % of the frame variance)")
+            if q > _QUANT_MAX_STEP * sd:
+                errors.append(msg + f"; with a step above {_QUANT_MAX_STEP:g} standard "
+                              "deviation the rounding error is neither white nor independent "
+                              "of the motion, and k and gamma are biased (by several SE at "
+                              "1.5-2 std). Record with a finer position resolution")
+            else:
+                notes.append(msg + ", which the tracking-noise term eps^2 absorbs (its "
+                             "fitted value includes it); models without tracking noise "
+                             "(naive, blur) would put k that much too low")
+    if errors:
+        if strict:
+            raise ValueError("; ".join(errors) + ". Crop the saturated stretches or fix the "
+                             "detector range/resolution; strict=False fits anyway (with a "
+                             "note; the result is then biased).")
+        notes = [f"NOT TRUSTWORTHY (strict=False): {e}" for e in errors] + notes
+    return notes
+
+
 def _no_temporal_information_message(recs, info):
     best = max(z for _, z in info)
     v, se = empirical_variance_se(recs[0].positions)
     n = min(r.n_frames for r in recs)
-    why = (f"only {n} frames" if n < 200 else
+    out = _outlier_sentence(recs)
+    why = (out if out else f"only {n} frames" if n < 200 else
            "dt >> tau (the bead relaxes between frames), or tracking noise dominates the motion")
     return (
         f"these recordings cannot identify gamma: the lag-1 correlation of the frames is only "
@@ -756,11 +967,15 @@ def calibrate(
       (``result.params``); missing names use the closed-form starts.
     - `strict`: raise ``FitError`` when the Fisher information is singular (default); with
       ``strict=False`` (spectral methods) the fit is returned with NaN errors and a note.
+      Saturated frames (a pile-up at exactly the minimum or maximum value) and positions
+      quantised in steps above their standard deviation raise ``ValueError``; with
+      ``strict=False`` they give a note instead. Milder quantisation (steps above std/4)
+      and a few saturated frames are noted in ``result.notes``.
 
     **Returns:** :class:`CalibrationResult` (SI units).
 
     **Raises:** ``FitError`` when a fit does not converge or is not identifiable;
-    ``ValueError`` for bad arguments.
+    ``ValueError`` for bad arguments and for saturated or coarsely quantised frames.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got method = {method!r}")
@@ -770,6 +985,78 @@ def calibrate(
     mdl: TrapModel = get_model(model)
     n_blocks, f_range = _check_options(recs, method, likelihood, k, n_blocks, f_range,
                                        diffusion, pade, start, strict)
+    radii = _bead_radii(recs)
+    data_notes = tuple(_inspect_frames(recs, bool(strict)))
+    res = _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade,
+                     start, strict)
+    data_notes += tuple(_stokes_notes(recs, radii, res))
+    if data_notes:
+        res = dataclasses.replace(res, notes=tuple(res.notes) + data_notes)
+    return res
+
+
+#: a fitted gamma outside [1/3, 3] x the Stokes friction of the known bead is flagged
+_STOKES_MAX_RATIO = 3.0
+
+
+def _bead_radii(recs) -> list:
+    """``metadata['bead_radius_m']`` (and optional ``'viscosity_Pa_s'``) per recording, as
+    ``(radius, viscosity or None)`` or ``None``; a value that is not a plausible radius in
+    metres is a ValueError."""
+    out = []
+    for i, r in enumerate(recs):
+        meta = getattr(r, "metadata", None) or {}
+        rad = meta.get("bead_radius_m")
+        if rad is None:
+            out.append(None)
+            continue
+        ok = isinstance(rad, numbers.Real) and not isinstance(rad, bool) and \
+            math.isfinite(rad) and rad > 0
+        if not ok:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] must be a bead radius "
+                             f"in m (> 0, finite); got {rad!r}")
+        if rad > 1e-3:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] = {rad!r} m is "
+                             f"implausibly large: it looks like um or nm (1 um = 1e-6 m)")
+        eta = meta.get("viscosity_Pa_s")
+        if eta is not None and not (isinstance(eta, numbers.Real) and not isinstance(eta, bool)
+                                    and math.isfinite(eta) and eta > 0):
+            raise ValueError(f"recording {i}: metadata['viscosity_Pa_s'] must be > 0 (Pa s); "
+                             f"got {eta!r}")
+        out.append((float(rad), None if eta is None else float(eta)))
+    return out
+
+
+def _stokes_notes(recs, radii, res) -> list:
+    """A note when the fitted gamma is far from Stokes' 6 pi eta r of the known bead."""
+    from ..physics._effects import water_viscosity
+
+    g = float(res.gamma)
+    if not (math.isfinite(g) and g > 0) or res.method == "equipartition":
+        return []
+    for i, (r, ri) in enumerate(zip(recs, radii)):
+        if ri is None:
+            continue
+        rad, eta = ri
+        t = float(r.temperature)
+        which = "metadata viscosity_Pa_s" if eta is not None else f"water at {t:g} K"
+        eta = eta if eta is not None else float(water_viscosity(t))
+        g0 = 6.0 * math.pi * eta * rad
+        ratio = g / g0
+        if 1.0 / _STOKES_MAX_RATIO <= ratio <= _STOKES_MAX_RATIO:
+            return []
+        return [f"gamma = {g:.4g} N s/m is {ratio:.3g} x the Stokes friction 6 pi eta r = "
+                f"{g0:.4g} N s/m of the bead (r = {rad:.4g} m from recording {i}'s metadata "
+                f"bead_radius_m, eta = {eta:.4g} Pa s, {which}); expected within "
+                f"{1 / _STOKES_MAX_RATIO:.2g}-{_STOKES_MAX_RATIO:g} x (a nearby surface raises "
+                "it by Faxen's factor, < 3 x above ~1.1 radii). Check the position "
+                "calibration (units), the exposure and frame interval, the bead radius and "
+                "the temperature"]
+    return []
+
+
+def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,
+               strict):
     notes: list[str] = []
 
     if method == "equipartition":

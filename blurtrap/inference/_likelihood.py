@@ -14,6 +14,10 @@ recursion ``v_t = d - e^2/v_(t-1)``, ``eps_t = W_t - (e/v_(t-1)) eps_(t-1)`` is 
 
 The unknown trap centre is handled by REML: the GLS mean is profiled out and
 ``-1/2 log(1' Sigma^-1 1)`` added, which removes the O(1/N) downward bias of the variance.
+Both are exactly invariant to a constant shift of the frames, so the frames are first centred
+on their sample mean: otherwise the profiled quadratic form ``y'S^-1 y - (1'S^-1 y)^2 / 1'S^-1 1``
+is the difference of two numbers of order ``N offset^2 / C(0)`` and loses ``log10(offset^2 /
+C(0))`` digits (all of them for a 1 m offset on a 10 nm trace).
 
 **Whittle likelihood.** ``-sum_j [log P_j + I_j / P_j]`` over Fourier frequencies in
 (0, fs/2] with the exact discrete PSD; O(N log N), asymptotically equivalent.
@@ -117,9 +121,14 @@ def arma_loglik(y, c0, c1, rho, *, mean: str = "reml", mask=None):
     """
     if mean not in ("zero", "profile", "reml"):
         raise ValueError(f"mean must be 'zero', 'profile' or 'reml'; got mean = {mean!r}")
+    y = jnp.asarray(y)
+    c0, c1, rho = (jnp.asarray(v, dtype=y.dtype) for v in (c0, c1, rho))
     if mask is None:
         mask = jnp.ones_like(y)
     n = jnp.sum(mask)
+    if mean != "zero":
+        # shift-invariant: centre first, so the profiled quadratic form does not cancel
+        y = (y - jnp.sum(mask * y) / n) * mask
     if mean == "zero":
         eps, v = _whiten(y, c0, c1, rho)
         return -0.5 * (n * _LOG2PI + jnp.sum(mask * jnp.log(v)) + jnp.sum(mask * eps * eps / v))

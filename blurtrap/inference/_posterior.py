@@ -511,6 +511,37 @@ def _resolve_priors(layout, priors) -> tuple[tuple, tuple]:
     return tuple(out), tuple(fns)
 
 
+_TRACER_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
+                  jax.errors.TracerBoolConversionError, jax.errors.TracerIntegerConversionError)
+
+
+def _check_user_priors(fns, names) -> None:
+    """Trace each user log-prior once on abstract scalars (no compilation, no data): a
+    function that is not JAX-traceable, reads an unknown name or does not return a scalar
+    fails here with a clear message, before any fitting."""
+    params = {n: jax.ShapeDtypeStruct((), jnp.float64) for n in names}
+    for fn in fns:
+        what = getattr(fn, "__name__", type(fn).__name__)
+        try:
+            out = jax.eval_shape(fn, params)
+        except _TRACER_ERRORS as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            raise TypeError(
+                f"priors: the user log-prior {what!r} is not JAX-traceable: it is called with "
+                "JAX tracers (params maps each of "
+                f"{list(names)} to a traced scalar) and must use jax.numpy only - no float(), "
+                "math.*, np.* or Python if/else on parameter values (write jnp.log(p['k']), "
+                f"jnp.where(cond, a, b)). JAX said: {first}"
+            ) from exc
+        except KeyError as exc:
+            raise ValueError(f"priors: the user log-prior {what!r} reads params[{exc}], but "
+                             f"the parameters of this model are {list(names)}") from exc
+        shape = getattr(out, "shape", None)
+        if shape is None or math.prod(shape) != 1:
+            raise TypeError(f"priors: the user log-prior {what!r} must return one scalar "
+                            f"(a log density); it returned shape {shape}")
+
+
 def _derived(layout, chain_nat: np.ndarray, temperature: float) -> dict[str, np.ndarray]:
     """Samples keyed like :meth:`CalibrationResult.to_dict` plus derived quantities (SI)."""
     flat = chain_nat.reshape(-1, chain_nat.shape[-1])
@@ -649,6 +680,7 @@ def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
             f"got n_walkers = {n_walkers}"
         )
     prior_objs, user_fns = _resolve_priors(layout, priors)
+    _check_user_priors(user_fns, layout.names)
 
     # ---- maximum-likelihood start ------------------------------------------------------
     ml = calibrate(recs, method="likelihood", likelihood=likelihood, model=mdl, k=k_mode,
@@ -724,7 +756,7 @@ def sample_posterior(
     - `f_range`: ``(f_min, f_max)`` [Hz] for the Whittle likelihood.
     - `init_scale`: walkers start at ``theta_ML + init_scale * L z`` (``L L^T`` the ML
       covariance of log parameters from :func:`calibrate`, each SD capped at 1; ``z``
-      standard normal). An ML value within 3 SE outside a (Log)Uniform prior's bounds (eps^2
+      standard normal); a number in (0, 1]. An ML value within 3 SE outside a (Log)Uniform prior's bounds (eps^2
       ~ 0) starts just inside them.
     - `burn_in`: steps discarded; default ``max(3 tau_max, n_steps / 10)`` (at most half).
 
@@ -733,6 +765,7 @@ def sample_posterior(
     **Warns:** :class:`ShortChainWarning` when ``n_steps < 50 tau_max``.
 
     **Raises:** ``ValueError`` for bad arguments or a start outside the prior's support;
+    ``TypeError`` for a user log-prior that is not JAX-traceable (checked before any fit);
     ``FitError`` when the maximum-likelihood start cannot be found.
     """
     import emcee
@@ -742,8 +775,15 @@ def sample_posterior(
     n_walkers, n_steps = int(n_walkers), int(n_steps)
     if n_steps < 10:
         raise ValueError(f"n_steps must be >= 10; got {n_steps}")
-    if not init_scale > 0:
-        raise ValueError(f"init_scale must be > 0; got {init_scale!r}")
+    ok = isinstance(init_scale, (int, float, np.integer, np.floating)) and not isinstance(
+        init_scale, (bool, np.bool_))
+    if not (ok and math.isfinite(float(init_scale)) and 0.0 < float(init_scale) <= 1.0):
+        raise ValueError(
+            f"init_scale must be a finite number in (0, 1]: the walkers start within "
+            "init_scale maximum-likelihood standard errors of the ML point, in log "
+            "parameters (default 0.1); larger balls start walkers where the posterior is "
+            f"negligible or zero; got init_scale = {init_scale!r}")
+    init_scale = float(init_scale)
     su = _setup(data, model, priors, n_walkers, likelihood, k, f_range)
     recs, mdl, layout, k_mode, ml = su.recs, su.model, su.layout, su.k_mode, su.ml
     theta_ml, cov_theta, log_prob, lik = su.theta_start, su.cov_theta, su.log_prob, su.lik

@@ -352,7 +352,10 @@ def make_exact_args(recordings, layout, model, mean="reml") -> ExactArgs:
     ys = np.zeros((len(recordings), n_max))
     mask = np.zeros((len(recordings), n_max))
     for i, r in enumerate(recordings):
-        ys[i, : r.n_frames] = np.asarray(r.positions, dtype=float)
+        y = np.asarray(r.positions, dtype=float)
+        # "reml" and "profile" are exactly invariant to a constant shift: centre on the host in
+        # float64 (a large offset would otherwise cost digits in the profiled quadratic form)
+        ys[i, : r.n_frames] = y if mean == "zero" else y - y.mean()
         mask[i, : r.n_frames] = 1.0
     return ExactArgs(layout=layout, model=model, meta=rec_meta(recordings),
                      ys=jnp.asarray(ys), mask=jnp.asarray(mask), mean=mean)
