@@ -32,6 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import x64_context
+
 # Wide physical bounds of the default priors (SI), core and effect parameters: log-uniform,
 # except ``tracking_var`` (uniform on [0, 1e-10] m^2; see :class:`Uniform`).
 DEFAULT_BOUNDS = {
@@ -58,7 +60,7 @@ class Prior(eqx.Module):
 
     def support_contains(self, value) -> bool:
         """Whether ``value`` [SI] has finite log density (host-side check)."""
-        with jax.enable_x64(True):
+        with x64_context(True):
             return bool(jnp.isfinite(self.log_prob(jnp.asarray(float(value)))))
 
 
@@ -247,7 +249,7 @@ def stokes_gamma_prior(
             g = g * faxen_factor(r, h)
         return g
 
-    with jax.enable_x64(True):
+    with x64_context(True):
         x0 = jnp.array([radius, temperature if viscosity is None else viscosity,
                         height if height is not None else 1.0])
         errs = jnp.array([radius_err, temperature_err if viscosity is None else viscosity_err,
