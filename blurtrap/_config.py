@@ -29,7 +29,7 @@ def enable_x64(enable: bool = True) -> None:
 
 
 def x64_enabled() -> bool:
-    return bool(jax.config.jax_enable_x64)
+    return bool(jax.config.jax_enable_x64)  # pyright: ignore[reportAttributeAccessIssue]  # set at runtime
 
 
 def x64_context(enable: bool = True):

@@ -131,7 +131,7 @@ def _prepare(y, constant, n_blocks, m, dt, w, temp, noise):
         power[constant] = power[~constant].mean(axis=0) if (~constant).any() else 1e-20
         mom[:, constant] = _lag_moments(power[constant], m, dt)
         avg[constant] = power[constant].mean(axis=1)
-    starts = _moment_starts(*mom, dt, w, temp)
+    starts = _moment_starts(*mom, dt, w, temp)  # pyright: ignore[reportCallIssue]  # mom: 3 rows
     if not noise:
         starts = starts[:, :2]
     return power, starts, np.log(avg)

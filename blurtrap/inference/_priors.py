@@ -67,8 +67,8 @@ class Prior(eqx.Module):
 class LogUniform(Prior):
     """Log-uniform (scale-invariant) prior on ``[low, high]`` (uniform in ``log p``)."""
 
-    low: jax.Array
-    high: jax.Array
+    low: jax.Array | np.ndarray
+    high: jax.Array | np.ndarray
 
     def __init__(self, low, high):
         low, high = float(low), float(high)
@@ -94,8 +94,8 @@ class Uniform(Prior):
     proportional to ``L(0) x log(eps^2_typical / low)`` near eps^2 ~ low, i.e. on an
     arbitrary lower cut-off, dragging the correlated k and gamma with it."""
 
-    low: jax.Array
-    high: jax.Array
+    low: jax.Array | np.ndarray
+    high: jax.Array | np.ndarray
 
     def __init__(self, low, high):
         low, high = float(low), float(high)
@@ -114,8 +114,8 @@ class Uniform(Prior):
 class Normal(Prior):
     """Gaussian prior ``N(mean, sd^2)`` on the natural parameter (restricted to ``p > 0``)."""
 
-    mean: jax.Array
-    sd: jax.Array
+    mean: jax.Array | np.ndarray
+    sd: jax.Array | np.ndarray
 
     def __init__(self, mean, sd):
         mean, sd = float(mean), float(sd)
@@ -133,8 +133,8 @@ class Normal(Prior):
 class LogNormal(Prior):
     """Log-normal prior: ``log p ~ N(log median, sigma^2)``."""
 
-    median: jax.Array
-    sigma: jax.Array
+    median: jax.Array | np.ndarray
+    sigma: jax.Array | np.ndarray
 
     def __init__(self, median, sigma):
         median, sigma = float(median), float(sigma)
@@ -153,8 +153,8 @@ class LogNormal(Prior):
 class InverseGamma(Prior):
     """Inverse-gamma prior ``p(v) ~ v^(-shape-1) exp(-scale / v)`` (``v > 0``)."""
 
-    shape: jax.Array
-    scale: jax.Array
+    shape: jax.Array | np.ndarray
+    scale: jax.Array | np.ndarray
 
     def __init__(self, shape, scale):
         shape, scale = float(shape), float(scale)
