@@ -5,9 +5,10 @@ blurtrap guarantees float64 for inference in two ways:
 1. ``blurtrap.enable_x64()`` switches JAX to 64-bit globally. The CLI, the notebooks and the
    test-suite call it first.
 2. Every public estimator (``calibrate``, the likelihoods, ``sample_posterior``, ``diagnose``)
-   runs inside :func:`float64_scope`, i.e. ``jax.enable_x64(True)``, so it computes in float64
-   even when the user never called ``enable_x64``. If the *data* arrive as float32 the
-   precision is already lost, so :func:`warn_if_float32` warns.
+   runs inside :func:`float64_scope`, i.e. ``jax.enable_x64(True)`` (``jax.experimental.enable_x64``
+   on jax < 0.8, see :func:`x64_context`), so it computes in float64 even when the user never
+   called ``enable_x64``. If the *data* arrive as float32 the precision is already lost, so
+   :func:`warn_if_float32` warns.
 
 The physics functions follow the dtype of their inputs and are written to stay accurate in
 float32 as well (series branches, ``expm1``, no catastrophic cancellation).
@@ -28,7 +29,18 @@ def enable_x64(enable: bool = True) -> None:
 
 
 def x64_enabled() -> bool:
-    return bool(jax.config.jax_enable_x64)
+    return bool(jax.config.jax_enable_x64)  # pyright: ignore[reportAttributeAccessIssue]  # set at runtime
+
+
+def x64_context(enable: bool = True):
+    """Context manager: 64-bit JAX types on (or off) inside the ``with`` block only.
+
+    ``jax.enable_x64`` (jax >= 0.8), else ``jax.experimental.enable_x64`` (older jax, which
+    has no ``jax.enable_x64``); both are thread-local and restore the previous setting."""
+    ctx = getattr(jax, "enable_x64", None)
+    if ctx is None:  # older jax: the context manager lives in jax.experimental
+        from jax.experimental import enable_x64 as ctx  # pyright: ignore[reportAttributeAccessIssue]
+    return ctx(bool(enable))
 
 
 def float64_scope(fn):
@@ -36,7 +48,7 @@ def float64_scope(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        with jax.enable_x64(True):
+        with x64_context(True):
             return fn(*args, **kwargs)
 
     return wrapper

@@ -19,6 +19,7 @@ import time
 import traceback
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -226,7 +227,7 @@ def make_row(label, method, model, cfg, powers, ks, kerrs, gamma=None, gamma_err
         row.update(gamma_pN_s_per_um=None, gamma_err_pN_s_per_um=None, gamma_error_pct=None)
     elif np.ndim(gamma):
         row["gamma_pN_s_per_um"] = [_f(g * 1e6) for g in gamma]
-        row["gamma_err_pN_s_per_um"] = [_f(e * 1e6) for e in gamma_err]
+        row["gamma_err_pN_s_per_um"] = [_f(e * 1e6) for e in gamma_err]  # pyright: ignore
         row["gamma_error_pct"] = [_pct(g, g_true) for g in gamma]
     else:
         row["gamma_pN_s_per_um"] = _f(gamma * 1e6)
@@ -373,7 +374,7 @@ class _Steps:
         self.log = log
         self.records = []
 
-    def run(self, name, fn, *, needs=()):
+    def run(self, name, fn, *, needs=()) -> Any:  # the step's value; None if it failed
         missing = [n for n in needs if n is None]
         if missing:
             self.records.append({"step": name, "status": "skipped",

@@ -577,7 +577,7 @@ def compare(fit_a: CalibrationResult, fit_b: CalibrationResult) -> dict:
     """Compare two fits of the same data (same method): goodness of fit, the log-likelihood
     gain and ``delta_aic = AIC(a) - AIC(b)`` (> 0: b is better), and the shift of each shared
     parameter in units of fit_a's standard error."""
-    out = {"gof_a": dict(fit_a.gof), "gof_b": dict(fit_b.gof)}
+    out: dict = {"gof_a": dict(fit_a.gof), "gof_b": dict(fit_b.gof)}
     if "nll" in fit_a.extras and "nll" in fit_b.extras:
         dll = float(fit_a.extras["nll"] - fit_b.extras["nll"])
         ddof = len(fit_b.param_names) - len(fit_a.param_names)

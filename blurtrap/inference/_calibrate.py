@@ -7,6 +7,7 @@ import math
 import numbers
 import os
 import warnings
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -33,7 +34,7 @@ METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_pow
            "equipartition", "allan")
 
 
-def as_recordings(data) -> list:
+def as_recordings(data: Any) -> list:
     """Accept a Recording, a RecordingSet, a sequence of Recordings or a path."""
     if isinstance(data, (str, os.PathLike)):
         from ..data import load
@@ -216,7 +217,7 @@ def _start_vector(recs, layout, noise, start=None):
     else:
         idx = np.asarray(layout.k_index)
         kvec = [np.median(ks[idx == j]) for j in range(layout.n_k)]
-    vec = list(kvec) + [np.median(starts[:, 1])]
+    vec: list = list(kvec) + [np.median(starts[:, 1])]
     if noise:
         vec.append(np.median(starts[:, 2]))
     for name in getattr(layout, "extra_names", ()):
@@ -593,6 +594,7 @@ def _fit_exact(recs, layout, model, notes):
         if out is None or (bool(cand.converged) and (not bool(out.converged)
                                                       or float(cand.nll) < float(out.nll))):
             out = cand
+    assert out is not None  # starts is never empty
     _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
@@ -796,7 +798,7 @@ def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pa
                              f"{type(start).__name__}")
         for name, v in start.items():
             ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) \
-                and v > 0
+                and v > 0  # pyright: ignore[reportOperatorIssue]  # numbers.Real orders
             if not ok:
                 raise ValueError(f"start[{name!r}] must be a finite number > 0 (SI units); got "
                                  f"{v!r}")

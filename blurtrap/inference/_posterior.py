@@ -475,7 +475,7 @@ def _resolve_priors(layout, priors) -> tuple[tuple, tuple]:
             fns.append(f)
         priors = {}
     valid = set(layout.names) | {_base(n) for n in layout.names}
-    for key, val in dict(priors).items():
+    for key, val in dict(priors).items():  # pyright: ignore[reportCallIssue, reportArgumentType]
         if key is None or key == "log_prior":
             vals = val if isinstance(val, (list, tuple)) else [val]
             for f in vals:
@@ -493,7 +493,7 @@ def _resolve_priors(layout, priors) -> tuple[tuple, tuple]:
                 f"priors[{key!r}] must be a blurtrap Prior (LogUniform, Normal, LogNormal, "
                 f"InverseGamma, ...); got {type(val).__name__}"
             )
-        per[key] = val
+        per[key] = val  # pyright: ignore[reportArgumentType]  # key: a str in layout.names
     out = []
     for name in layout.names:
         base = _base(name)
@@ -822,8 +822,8 @@ def sample_posterior(
     t_sample = time.perf_counter() - t0
 
     # ---- diagnostics -------------------------------------------------------------------
-    chain = sampler.get_chain()  # (n_steps, n_walkers, ndim) in theta
-    lps = sampler.get_log_prob()
+    chain = np.asarray(sampler.get_chain())  # (n_steps, n_walkers, ndim) in theta
+    lps = np.asarray(sampler.get_log_prob())
     tau_full = _integrated_time(emcee, chain)
     tau_max = float(np.nanmax(tau_full)) if np.any(np.isfinite(tau_full)) else float(n_steps)
     if burn_in is None:

@@ -32,6 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._config import x64_context
+
 # Wide physical bounds of the default priors (SI), core and effect parameters: log-uniform,
 # except ``tracking_var`` (uniform on [0, 1e-10] m^2; see :class:`Uniform`).
 DEFAULT_BOUNDS = {
@@ -58,15 +60,15 @@ class Prior(eqx.Module):
 
     def support_contains(self, value) -> bool:
         """Whether ``value`` [SI] has finite log density (host-side check)."""
-        with jax.enable_x64(True):
+        with x64_context(True):
             return bool(jnp.isfinite(self.log_prob(jnp.asarray(float(value)))))
 
 
 class LogUniform(Prior):
     """Log-uniform (scale-invariant) prior on ``[low, high]`` (uniform in ``log p``)."""
 
-    low: jax.Array
-    high: jax.Array
+    low: jax.Array | np.ndarray
+    high: jax.Array | np.ndarray
 
     def __init__(self, low, high):
         low, high = float(low), float(high)
@@ -92,8 +94,8 @@ class Uniform(Prior):
     proportional to ``L(0) x log(eps^2_typical / low)`` near eps^2 ~ low, i.e. on an
     arbitrary lower cut-off, dragging the correlated k and gamma with it."""
 
-    low: jax.Array
-    high: jax.Array
+    low: jax.Array | np.ndarray
+    high: jax.Array | np.ndarray
 
     def __init__(self, low, high):
         low, high = float(low), float(high)
@@ -112,8 +114,8 @@ class Uniform(Prior):
 class Normal(Prior):
     """Gaussian prior ``N(mean, sd^2)`` on the natural parameter (restricted to ``p > 0``)."""
 
-    mean: jax.Array
-    sd: jax.Array
+    mean: jax.Array | np.ndarray
+    sd: jax.Array | np.ndarray
 
     def __init__(self, mean, sd):
         mean, sd = float(mean), float(sd)
@@ -131,8 +133,8 @@ class Normal(Prior):
 class LogNormal(Prior):
     """Log-normal prior: ``log p ~ N(log median, sigma^2)``."""
 
-    median: jax.Array
-    sigma: jax.Array
+    median: jax.Array | np.ndarray
+    sigma: jax.Array | np.ndarray
 
     def __init__(self, median, sigma):
         median, sigma = float(median), float(sigma)
@@ -151,8 +153,8 @@ class LogNormal(Prior):
 class InverseGamma(Prior):
     """Inverse-gamma prior ``p(v) ~ v^(-shape-1) exp(-scale / v)`` (``v > 0``)."""
 
-    shape: jax.Array
-    scale: jax.Array
+    shape: jax.Array | np.ndarray
+    scale: jax.Array | np.ndarray
 
     def __init__(self, shape, scale):
         shape, scale = float(shape), float(scale)
@@ -247,7 +249,7 @@ def stokes_gamma_prior(
             g = g * faxen_factor(r, h)
         return g
 
-    with jax.enable_x64(True):
+    with x64_context(True):
         x0 = jnp.array([radius, temperature if viscosity is None else viscosity,
                         height if height is not None else 1.0])
         errs = jnp.array([radius_err, temperature_err if viscosity is None else viscosity_err,

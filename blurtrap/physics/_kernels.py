@@ -155,7 +155,8 @@ def variance_general(
     n_lorentz_panels = check_count("n_lorentz_panels", n_lorentz_panels, 1)
     n_linear_panels = check_count("n_linear_panels", n_linear_panels, 1)
     n_nodes = check_count("n_nodes", n_nodes, 1)
-    periods = check_positive("periods", periods, what="kernel periods integrated")
+    periods = check_positive(  # pyright: ignore[reportAssignmentType]
+        "periods", periods, what="kernel periods integrated")
     k = check_positive("k", k, "N/m", what="trap stiffness")
     gamma = check_positive("gamma", gamma, "N s/m", what="friction coefficient")
     t = check_positive("temperature", temperature, "K")

@@ -188,7 +188,7 @@ def psd_measured(
         return _psd_discrete(f, sigma2, tau, w, dt, eps2)
     n_alias = check_count("n_alias", n_alias, 0, allowed=" or None")
     arrs = jnp.broadcast_arrays(f, sigma2, tau, w, dt, eps2)
-    return _psd_alias_sum(*arrs, n_alias)
+    return _psd_alias_sum(*arrs, n_alias)  # pyright: ignore[reportCallIssue]  # arrs: 6 arrays
 
 
 def _autocovariance(n, sigma2, tau, w, dt, eps2):

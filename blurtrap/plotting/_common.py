@@ -148,9 +148,9 @@ def model_psd(params, recording, f, model=None, index: int = 0):
 
     ``model`` defaults to the model of a ``CalibrationResult`` (``naive``, ``naive_aliased``,
     ``blur``, ``standard``), else ``standard``."""
-    import jax
     import jax.numpy as jnp
 
+    from .._config import x64_context
     from ..inference import get_model
 
     k, g, e2, t = trap_params(params, index)
@@ -159,7 +159,7 @@ def model_psd(params, recording, f, model=None, index: int = 0):
     if is_result(params):  # effect parameters (drift_diffusion, line_amplitude, ...)
         extras = {p.name: params.params[p.name] for p in mdl.extra_params
                   if p.name in params.params}
-    with jax.enable_x64(True):
+    with x64_context(True):
         f2 = jnp.asarray(np.asarray(f, dtype=float)[None, :])
         one = lambda v: jnp.asarray([float(v)])  # noqa: E731
         p = mdl.psd(f2, one(k), one(g), jnp.asarray(e2), one(recording.frame_interval),

@@ -541,7 +541,7 @@ def _jit_for_cpu():
     plain = jax.jit(run_chunk, static_argnums=(0, 1, 2))
     wide = jax.jit(run_chunk, static_argnums=(0, 1, 2),
                    compiler_options={"xla_cpu_prefer_vector_width": 512})
-    use_wide = [None]
+    use_wide: list[bool | None] = [None]
 
     def call(*args):
         if use_wide[0] is None:

@@ -64,7 +64,7 @@ class ExposureWindows:
 
 
 def _concrete(name, value, unit):
-    if isinstance(value, jax.core.Tracer):
+    if isinstance(value, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]
         raise ValueError(
             f"simulate needs concrete parameter values (it sets loop lengths from them); "
             f"{name} [{unit}] is traced. Call simulate outside jit/vmap/grad; it is vectorised "
@@ -125,7 +125,7 @@ def _resolve_dtype(dtype):
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"dtype must be float32 or float64; got dtype = {dt.name}")
-    if dt == np.float64 and not jax.config.jax_enable_x64:
+    if dt == np.float64 and not jax.config.jax_enable_x64:  # pyright: ignore[reportAttributeAccessIssue]
         raise ValueError(
             "dtype = float64 needs 64-bit JAX: call blurtrap.enable_x64() first, or pass "
             "dtype=jnp.float32"
@@ -645,12 +645,12 @@ def simulate(
         exact_fit = t_buf == n_traces and burn_in_frames == 0 and n_buf == n_frames
         pos = buf if exact_fit else buf[..., :n_traces, burn_in_frames:total]
         if jitter:
-            dj = dbuf if exact_fit else dbuf[:, :n_traces, burn_in_frames:total]
+            dj = dbuf if exact_fit else dbuf[:, :n_traces, burn_in_frames:total]  # pyright: ignore
     out_shape = tuple(shape) + ((n_win,) if windows else ()) + (n_traces, n_frames)
     if jitter:
         n_idx = jnp.arange(n_frames, dtype=dtype)
         times = (n_idx * jnp.asarray(dtf, dtype)[:, None, None]
-                 + dj * jnp.asarray(tau, dtype)[:, None, None])
+                 + dj * jnp.asarray(tau, dtype)[:, None, None])  # pyright: ignore[reportOptionalOperand]
     elif return_times or additive:
         times = jnp.broadcast_to(jnp.asarray(np.arange(n_frames) * dtf[:, None, None], dtype),
                                  (G, 1, n_frames))
@@ -674,6 +674,6 @@ def simulate(
     if pos.shape != out_shape:
         pos = pos.reshape(out_shape)
     if return_times:
-        tshape = tuple(shape) + ((1,) if windows else ()) + (times.shape[-2], n_frames)
-        return pos, times.reshape(tshape)
+        tshape = tuple(shape) + ((1,) if windows else ()) + (times.shape[-2], n_frames)  # pyright: ignore
+        return pos, times.reshape(tshape)  # pyright: ignore[reportOptionalMemberAccess]
     return pos
