@@ -27,6 +27,7 @@ from ._problems import (
     spectral_model_psd,
     spectral_nll,
 )
+from ._profile import ProfileIntervals
 from ._result import CalibrationResult, FitError
 from ._variance import VarianceArgs, empirical_variance_se, fit_variances
 
@@ -487,7 +488,13 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None):
         )
 
 
-def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None):
+def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None,
+              at_bound=None, interval_source=None):
+    """The result of a fit. ``at_bound``: the fit's bound flags (``FitOutput.at_bound``, the
+    one rule :func:`blurtrap.inference._fit.at_lower_bound`); those parameters get a NaN error
+    (the fit already made their variance NaN and the others' conditional on the bound).
+    ``interval_source``: where the result's profile intervals come from
+    (:class:`blurtrap.inference._profile.ProfileIntervals`; default: Wald intervals only)."""
     values = np.asarray(values, dtype=float)
     cov = np.asarray(cov, dtype=float)
     names = layout.names
@@ -503,14 +510,18 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
     if "power_offset" in names:
         p0 = values[names.index("power_offset")]
         k_rec = k_rec * (1.0 - p0 / np.asarray(layout.power))
-    at_bounds = []
-    if layout.noise:
-        c0 = np.mean([np.var(np.asarray(r.positions)) for r in recs])
-        if values[names.index("tracking_var")] < 1e-6 * c0:
-            at_bounds.append("tracking_var")
-    var = np.diag(cov)
-    if np.isfinite(var).any():  # held at its lower bound by the fit (_fit.AT_BOUND): NaN SE
-        at_bounds += [n for n, v in zip(names, var) if np.isnan(v) and n not in at_bounds]
+    bound = np.zeros(len(names), bool) if at_bound is None else np.asarray(at_bound, bool)
+    at_bounds = [n for n, b in zip(names, bound) if b]
+    if bound.any():  # NaN error, whatever the caller's covariance says
+        cov = cov.copy()
+        cov[bound, :] = 0.0
+        cov[:, bound] = 0.0
+        cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
+        notes = tuple(notes) + (
+            f"{', '.join(at_bounds)} at the lower bound 0: NaN error there, and the other "
+            "errors are conditional on the bound (smaller than the spread of the estimates "
+            "when the bound is only nearly reached); result.intervals gives profile-likelihood "
+            "intervals that account for it",)
     temps = {float(r.temperature) for r in recs}
     if "drift_diffusion" in names:
         notes = tuple(notes) + (
@@ -534,6 +545,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         at_bounds=tuple(at_bounds),
         notes=tuple(notes),
         extras=extras or {},
+        interval_source=interval_source,
     )
 
 
@@ -548,7 +560,10 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
               "f": np.asarray(args.f), "ratio": np.asarray(args.power / psd),
               "weight": np.asarray(args.weight)}
-    res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras)
+    res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras,
+                    at_bound=out.at_bound,
+                    interval_source=ProfileIntervals(spectral_nll, args, scale, out.value,
+                                                     out.cov, out.at_bound))
     block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
     return _check_relaxation_resolved(res, recs, method_name, block)
 
@@ -588,19 +603,22 @@ def _fit_exact(recs, layout, model, notes):
         # where Whittle is unreliable (tau not << T) also start from the closed forms and
         # keep the better optimum: the exact likelihood can have a second local optimum there
         starts.append(moment)
-    out = None
+    out = s_out = None
     for s0 in starts:
         cand = fit_ml_fd_newton(exact_nll, s0, args)
         if out is None or (bool(cand.converged) and (not bool(out.converged)
                                                       or float(cand.nll) < float(out.nll))):
-            out = cand
+            out, s_out = cand, s0
     assert out is not None  # starts is never empty
     _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
     extras = {"loglik": -float(out.nll)}
-    res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras)
+    res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
+                    at_bound=out.at_bound,
+                    interval_source=ProfileIntervals(exact_nll, args, s_out, out.value, out.cov,
+                                                     out.at_bound, hessian="fd"))
     return _check_relaxation_resolved(res, recs, "likelihood (exact)")
 
 

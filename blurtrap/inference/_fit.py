@@ -4,8 +4,9 @@
 Every parameter handled here is positive (k, gamma, eps^2, c ...). The optimiser works in
 ``x = log(p / scale)`` (O(1) unknowns, positivity by construction); the covariance is the
 inverse Hessian of the negative log-likelihood with respect to the *natural* parameters
-(scaled to O(1) for conditioning), so that a parameter at its lower bound 0 (eps^2) still gets
-a finite, meaningful standard error.
+(scaled to O(1) for conditioning), so that a parameter near its lower bound 0 (eps^2) keeps a
+finite, meaningful standard error. One *at* the bound (:func:`at_lower_bound`, the single rule
+of the package) gets a NaN variance, and the others' errors are conditional on the bound.
 
 Each Newton iteration needs the value, gradient and exact Hessian at one point (a "pass"). By
 default they come from JAX autodiff of ``nll``; an objective may provide a faster pass and a
@@ -41,10 +42,31 @@ class FitOutput(eqx.Module):
     success: jax.Array  # bool: optimiser converged and Hessian positive definite
     converged: jax.Array
     hessian_pd: jax.Array
+    #: bool per parameter: at its lower bound 0 (:func:`at_lower_bound`); NaN variance there
+    at_bound: jax.Array | None = None
 
 
-#: a parameter below this fraction of its start value is at its lower bound 0 (eps^2 -> 0)
-AT_BOUND = 1e-8
+#: THE bound rule (used by every fit and by the result): a positive parameter is at its lower
+#: bound 0 when moving it from its estimate to exactly 0, the others held, changes the
+#: negative log-likelihood by less than this (in nats; the 95 % interval cut is 1.92, so this
+#: is statistically nothing). At an interior optimum that change is (p / sigma)^2 / 2, sigma
+#: the parameter's SE conditional on the others: the rule then means p < 1.4e-3 sigma. At a
+#: boundary optimum (the score at 0 points into the bound) the log-space fit stops once the
+#: change is below the Newton decrement tolerance (< 1e-13 (1 + |nll|)), far below this.
+BOUND_NLL = 1e-6
+
+
+def at_lower_bound(grad_x, h_x):
+    """Which parameters are at their lower bound 0, from the gradient and Hessian of the
+    objective in log parameters ``x = log(p / scale)`` at the fit (``u = exp(x)``).
+
+    The change of the objective when ``u_i`` goes from its value to 0 (others held) is, to
+    second order in ``u_i``, ``-u f' + u^2 f''/2 = H_ii/2 - 3 g_i/2`` (``g_i = u f'``,
+    ``H_ii = u^2 f'' + u f'``): below :data:`BOUND_NLL` in magnitude the parameter is at 0.
+    Scale-free (no reference to start values or data variances)."""
+    h_ii = jnp.diagonal(h_x)
+    change = 0.5 * h_ii - 1.5 * grad_x
+    return jnp.abs(change) < BOUND_NLL
 
 
 def _finish_from(x, value, grad_x, h_x, scale, converged, n_steps, x_value=None):
@@ -53,13 +75,14 @@ def _finish_from(x, value, grad_x, h_x, scale, converged, n_steps, x_value=None)
     d2f/du2 = (H_x - diag(grad_x))/(u u^T). The reported parameters are ``x_value`` (default
     ``x``), e.g. ``x`` plus the final, tiny Newton step.
 
-    Parameters run to their lower bound (``u < AT_BOUND``, e.g. eps^2 -> 0) are held there:
+    Parameters at their lower bound (:func:`at_lower_bound`, e.g. eps^2 -> 0) are held there:
     the others' covariance is the inverse of their own block of the information (errors
     conditional on the bound, as usual for a boundary estimate) and the bound parameter's
     variance is NaN. Its d2f/du2 would be (H - g)/u^2 with H and g both ~u: rounding noise, and
     with it the whole covariance was NaN (measured: weak photodiode-filter refits)."""
     u_hat = jnp.exp(x)
-    free = u_hat >= AT_BOUND
+    bound = at_lower_bound(grad_x, h_x)
+    free = ~bound
     both = free[:, None] & free[None, :]
     hess = (h_x - jnp.diag(grad_x)) / (u_hat[:, None] * u_hat[None, :])
     hess = 0.5 * (hess + hess.T)
@@ -79,6 +102,7 @@ def _finish_from(x, value, grad_x, h_x, scale, converged, n_steps, x_value=None)
         success=converged & pd,
         converged=converged,
         hessian_pd=pd,
+        at_bound=bound,
     )
 
 
@@ -141,7 +165,7 @@ MAX_LOG_STEP = 2.0
 _FTOL = 1e-13  # relative Newton decrement that counts as converged (boundary optima)
 
 
-def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps):
+def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0):
     """Safeguarded Newton's method from ``x0``: modified Newton direction (descent even
     where the Hessian is indefinite, :func:`_newton_direction`), steps capped at
     ``MAX_LOG_STEP`` and backtracking (step / 4) until the objective decreases (Armijo). Far
@@ -155,6 +179,11 @@ def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps):
     ``tol = atol + rtol max |x|`` (or when a < tol) with a positive-definite Hessian. The
     step that proves convergence is then also the last one: no further pass is needed, and
     a slowly (linearly) converging iteration is not mistaken for a converged one.
+
+    ``flat_atol`` (nats) is added to the flat-direction tolerance ``_FTOL (1 + |v|)``: the
+    profile-likelihood fits (:mod:`blurtrap.inference._profile`) need the objective only to
+    ~1e-7, and a parameter driven into its bound there would otherwise creep towards it by
+    floor-limited steps for many iterations.
 
     Returns ``(x, value, grad, hess, dx, n_passes, done, value_at_x0)`` at the last
     accepted point ``x``."""
@@ -176,7 +205,7 @@ def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps):
         # and only there (a positive-definite, slowly converging iteration must still meet the
         # step rule), a Newton decrement g.dx (twice the predicted decrease) below
         # _FTOL (1 + |v|) counts as converged
-        flat = ~pd & psd & (jnp.abs(jnp.dot(gt, dxt)) < _FTOL * (1.0 + jnp.abs(vt)))
+        flat = ~pd & psd & (jnp.abs(jnp.dot(gt, dxt)) < _FTOL * (1.0 + jnp.abs(vt)) + flat_atol)
         done_t = (pd & ((a < tol) | ((a < a_prev) & (a * a < tol * (a_prev - a))))) | flat
         pick = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
         return (pick(t, x), pick(vt, v), pick(gt, g), pick(ht, h), pick(dxt, dx),
@@ -326,18 +355,9 @@ def fit_ml_fd_newton(
         x = x + t * dx
     if not converged:
         return _bfgs_jit(nll, scale, args, tol, tol, max_steps)
-    u_hat = jnp.exp(x)
-    hess_u = (hess - jnp.diag(g)) / (u_hat[:, None] * u_hat[None, :])
-    hess_u = 0.5 * (hess_u + hess_u.T)
-    evals = jnp.linalg.eigvalsh(hess_u)
-    pd = bool(jnp.all(evals > 0) & jnp.all(jnp.isfinite(evals)))
-    cov = jnp.linalg.inv(hess_u) * scale[:, None] * scale[None, :]
-    cov = cov if pd else jnp.full_like(cov, jnp.nan)
-    return FitOutput(
-        value=scale * u_hat, cov=cov, nll=f0, grad_norm=jnp.max(jnp.abs(g)),
-        n_steps=jnp.asarray(n_it), success=jnp.asarray(pd), converged=jnp.asarray(True),
-        hessian_pd=jnp.asarray(pd),
-    )
+    # covariance and bound rule as every other fit (a non-positive-definite information
+    # gives NaN errors and success False)
+    return _finish_from(x, f0, g, hess, scale, jnp.asarray(True), jnp.asarray(n_it))
 
 
 def chi2_sf(x, dof) -> float:

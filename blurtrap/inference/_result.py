@@ -10,6 +10,9 @@ import numpy as np
 
 from ..physics._constants import BOLTZMANN
 
+#: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
+Z95 = 1.959963984540054
+
 # The one table of lab units (reports, plots, CLI): name -> (factor from SI, lab unit)
 LAB = {
     "k": (1e3, "pN/nm"),
@@ -35,6 +38,12 @@ LAB = {
 }
 
 
+def _json_float(v):
+    """A float for JSON: NaN and infinities become None (JSON has neither)."""
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
 class FitError(RuntimeError):
     """A fit did not converge or its Fisher matrix is singular; the message says which."""
 
@@ -45,6 +54,15 @@ class CalibrationResult:
 
     ``params``/``errors`` map parameter names (``k`` or ``k[...]``/``c``, ``gamma``,
     ``tracking_var``) to values; ``covariance`` is in the order of ``param_names``.
+
+    ``intervals`` maps every parameter name to its 95 % confidence interval ``(low, high)``
+    (SI); ``interval_kinds`` says how each was made: ``"wald"`` (estimate +- 1.96 SE, where
+    the likelihood is close to quadratic) or ``"profile"`` (likelihood-ratio interval: the
+    profile negative log-likelihood 1.92 above its minimum, used at or near a bound and where
+    a check finds the likelihood non-quadratic; a parameter whose profile at 0 is within 1.92
+    of the minimum gets low = 0). Results of fits without a likelihood get Wald intervals
+    (low = 0 and a NaN high end for a parameter at its bound). Both are computed on first
+    access.
     """
 
     method: str
@@ -62,6 +80,12 @@ class CalibrationResult:
     at_bounds: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     extras: dict = dataclasses.field(default_factory=dict)
+    #: callable ``source(result) -> (intervals, kinds)`` for the parameters whose Wald
+    #: interval is not honest (profile likelihood, :mod:`blurtrap.inference._profile`);
+    #: evaluated on first use of :attr:`intervals`
+    interval_source: Any = dataclasses.field(default=None, repr=False, compare=False)
+    _interval_cache: Any = dataclasses.field(default=None, init=False, repr=False,
+                                             compare=False)
 
     # ---- access -----------------------------------------------------------------------
     @property
@@ -109,6 +133,37 @@ class CalibrationResult:
     def tracking_var_err(self) -> float:
         return self._get("tracking_var")[1] if "tracking_var" in self.param_names else 0.0
 
+    def _wald_intervals(self):
+        half = Z95 * self.errors
+        ivs = {n: (float(v - h), float(v + h))
+               for n, v, h in zip(self.param_names, self.values, half, strict=True)}
+        for n in self.at_bounds:
+            if n in ivs:
+                ivs[n] = (0.0, math.nan)
+        return ivs, {n: "wald" for n in ivs}
+
+    def _interval_table(self):
+        if self._interval_cache is None:
+            ivs, kinds = self._wald_intervals()
+            if self.interval_source is not None:
+                more, more_kinds = self.interval_source(self)
+                ivs.update(more)
+                kinds.update(more_kinds)
+            object.__setattr__(self, "_interval_cache", (ivs, kinds))
+        return self._interval_cache
+
+    @property
+    def intervals(self) -> dict[str, tuple[float, float]]:
+        """95 % confidence interval ``(low, high)`` of every parameter (SI): Wald where the
+        likelihood is close to quadratic, profile likelihood at or near a bound or where it
+        is not (:attr:`interval_kinds`). Computed on first access."""
+        return dict(self._interval_table()[0])
+
+    @property
+    def interval_kinds(self) -> dict[str, str]:
+        """How each interval of :attr:`intervals` was made: ``"wald"`` or ``"profile"``."""
+        return dict(self._interval_table()[1])
+
     @property
     def correlation(self) -> np.ndarray:
         s = self.errors
@@ -142,6 +197,9 @@ class CalibrationResult:
             "n_frames": self.n_frames,
             "converged": self.converged,
             "at_bounds": list(self.at_bounds),
+            "intervals": {n: [_json_float(lo), _json_float(hi)]
+                          for n, (lo, hi) in self.intervals.items()},
+            "interval_kinds": dict(self.interval_kinds),
             "notes": list(self.notes),
             "units": "SI",
         }
@@ -153,10 +211,15 @@ class CalibrationResult:
         """A readable table in lab units (used by the CLI too): parameters with errors,
         derived D, tau, f_c and eps, per-recording k, goodness of fit and notes."""
         rows = []
+        ivs = {}
         for name, v, e in zip(self.param_names, self.values, self.errors, strict=True):
             base = name.split("[")[0]
             fac, unit = LAB.get(base, (1.0, "SI"))
             rows.append((name, v * fac, e * fac, unit))
+            if name in self.intervals:
+                lo, hi = self.intervals[name]
+                ivs[name] = (f"[{lo * fac:.4g}, {hi * fac:.4g}] "
+                             f"{self.interval_kinds.get(name, '')}").rstrip()
         g = self.gamma
         if math.isfinite(g):
             fac, unit = LAB["diffusion"]
@@ -178,10 +241,15 @@ class CalibrationResult:
         lines = [f"method: {self.method}   model: {self.model}   recordings: "
                  f"{self.n_recordings}   frames: {self.n_frames}   T = "
                  f"{self.temperature:g} K (kT = {BOLTZMANN * self.temperature * 1e21:.4g} pN nm)"]
-        lines.append(f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  unit")
+        wu = max(len(r[3]) for r in rows)
+        lines.append(f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  "
+                     f"{'unit'.ljust(wu)}  95 % interval" if ivs else
+                     f"  {'parameter'.ljust(w)}  {'value':>12}  {'+- error':>10}  unit")
         for name, v, e, unit in rows:
             err = f"{e:10.3g}" if math.isfinite(e) else " " * 10
-            lines.append(f"  {name.ljust(w)}  {v:12.6g}  {err}  {unit}")
+            iv = f"  {ivs[name]}" if name in ivs else ""
+            lines.append(f"  {name.ljust(w)}  {v:12.6g}  {err}  "
+                         f"{unit.ljust(wu) if ivs else unit}{iv}".rstrip())
         gof = self.gof
         if gof:
             lines.append(f"  goodness of fit: {gof.get('test', '')}: statistic = "
