@@ -62,11 +62,11 @@ def _args(recs, k_mode):
 def test_result_does_not_depend_on_the_start(demo_sets):
     recs = demo_sets[6]
     args, scale = _args(recs, "per_power")
-    p0, cov0, chi0, ok0, pd0 = _variance.fit_variances(args, scale)
+    p0, cov0, chi0, ok0, pd0, _ = _variance.fit_variances(args, scale)
     assert ok0 and pd0
     se = np.sqrt(np.diag(cov0))
     for f in (0.1, 10.0):  # moment start off by 10x in every parameter
-        p, cov, chi, ok, pd = _variance.fit_variances(args, np.asarray(scale) * f)
+        p, cov, chi, ok, pd, _ = _variance.fit_variances(args, np.asarray(scale) * f)
         assert ok and pd
         assert np.all(np.abs(p - p0) < 1e-3 * se) and abs(chi - chi0) < 1e-6 * (1 + chi0)
 
@@ -76,7 +76,7 @@ def test_fixed_point_weights_are_the_model_se_at_the_estimate(demo_sets):
     model at the estimate itself (the fixed point, not an intermediate pass)."""
     recs = [r for r in demo_sets[6] if abs(r.laser_power - 0.4) < 1e-9]
     args, scale = _args(recs, "shared")
-    p, cov, chi2, ok, pd = _variance.fit_variances(args, scale)
+    p, cov, chi2, ok, pd, _ = _variance.fit_variances(args, scale)
     assert ok and pd
     import jax
 
@@ -111,3 +111,38 @@ def test_tracking_var_on_its_bound_converges():
         assert res.converged and res.tracking_var >= 0 and np.isfinite(res.k_err)
         at_zero += res.tracking_var == 0.0
     assert at_zero >= 1
+
+
+def test_profile_intervals_and_joint_likelihood_note(demo_sets):
+    """Well identified (the demo's joint exposure series): the 95 % profile interval is the
+    Wald interval; the notes quote the joint likelihood's predicted gain."""
+    res = bt.calibrate(demo_sets[6], method="variance_vs_exposure")
+    iv = res.extras["intervals"]
+    assert set(iv) == set(res.param_names)
+    for name, value, se in zip(res.param_names, res.values, res.errors):
+        lo, hi = iv[name]
+        assert lo < value < hi
+        # nearly linear here: ends within 0.15 SE of value -+ 1.96 SE
+        np.testing.assert_allclose([lo, hi], [value - 1.96 * se, value + 1.96 * se],
+                                   rtol=0, atol=0.15 * se)
+    note = [n for n in res.notes if n.startswith("the joint likelihood on these recordings")]
+    assert len(note) == 1 and res.extras["joint_se_ratio"] > 1
+
+
+def test_profile_interval_respects_the_eps2_bound():
+    """A weakly separated design (one trap, W/dt = 0.1..1): where eps^2 sits on its bound the
+    Wald SE of k is inflated by the excluded eps^2 < 0 direction; the profile interval starts
+    at the estimate's lower edge and is asymmetric."""
+    import jax
+
+    gamma = DemoConfig().gamma
+    recs = []
+    for i, f in enumerate((0.1, 0.25, 0.5, 0.75, 1.0)):
+        x = bt.simulate(4e-5, gamma, f / 1500, 1 / 1500, 32768, key=jax.random.key(70 + i),
+                        method="exact_frames", tracking_std=2e-9)
+        recs.append(bt.Recording(np.asarray(x)[0], frame_interval=1 / 1500, exposure=f / 1500))
+    res = bt.calibrate(recs, method="variance_vs_exposure")
+    lo, hi = res.extras["intervals"]["k"]
+    assert 0 < lo <= res.k < hi and np.isfinite(hi)
+    lo_e, hi_e = res.extras["intervals"]["tracking_var"]
+    assert 0 <= lo_e <= res.tracking_var < hi_e
