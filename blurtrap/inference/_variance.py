@@ -221,21 +221,24 @@ def _grid_starts(a: VarianceArgs, scale):
     e_grid = [0.0]
     if layout.noise:
         e_grid += list(float(np.min(v)) * np.geomspace(1e-4, 0.7, 15))
-    cands = []
     idx = np.asarray(layout.k_index)
     power = np.asarray(layout.power, dtype=float)
-    for e in e_grid:
-        vv = np.maximum(v - e * (1.0 - 1.0 / n), 1e-3 * v)
-        for d in d_grid:
-            k_i = _pade_stiffness(vv, d, w, kt)
-            if layout.linear_power:
-                kvec = [np.exp(np.mean(np.log(k_i / power)))]
-            else:
-                kvec = [np.exp(np.mean(np.log(k_i[idx == j]))) if np.any(idx == j)
-                        else float(scale[j]) for j in range(nk)]
-            row = list(kvec) + [float(np.median(kt)) / d] + ([e] if layout.noise else [])
-            cands.append(row)
-    cands = np.asarray(cands)
+    e_arr = np.asarray(e_grid)[:, None, None]
+    vv = np.maximum(v - e_arr * (1.0 - 1.0 / n), 1e-3 * v)  # (E, 1, R)
+    log_k = np.log(_pade_stiffness(vv, d_grid[None, :, None], w, kt))  # (E, D, R)
+    if layout.linear_power:
+        kvec = np.exp(np.mean(log_k - np.log(power), axis=-1))[..., None]
+    else:
+        groups = (idx[None, :] == np.arange(nk)[:, None]).astype(float)  # (nk, R)
+        cnt = groups.sum(axis=1)
+        kvec = np.exp(log_k @ groups.T / np.maximum(cnt, 1.0))
+        kvec = np.where(cnt > 0, kvec, scale[:nk])
+    shape = kvec.shape[:2]
+    gam = np.broadcast_to((float(np.median(kt)) / d_grid)[None, :, None], shape + (1,))
+    parts = [kvec, gam]
+    if layout.noise:
+        parts.append(np.broadcast_to(e_arr[:, :, :1], shape + (1,)))
+    cands = np.concatenate(parts, axis=-1).reshape(-1, nk + 1 + int(layout.noise))
     a0 = eqx.tree_at(lambda x: x.se, a, _model_se(jnp.asarray(scale), a))
     chi2 = np.asarray(_chi2_many(jnp.asarray(cands), a0))
     chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
