@@ -348,9 +348,10 @@ def profile_intervals(a: VarianceArgs, p, chi2_min, level_delta=CHI2_95, max_fac
         def excess(t, x_start):
             x0 = x_start.copy()
             x0[j] = t
-            x, c2, ok = _solve_lsq(a, sc, x0, free, profile_eps, max_iter=100, atol=1e-4)
-            # not converged but already inside: the profile minimum is lower still
-            return c2 - chi2_min - level_delta, x, ok or c2 - chi2_min - level_delta <= 0
+            x, c2, _ = _solve_lsq(a, sc, x0, free, profile_eps, max_iter=100, atol=1e-4)
+            # a solve that stalls (the eps^2 >= 0 kink, or a parameter running off along an
+            # unbounded direction) still gives an upper bound on the profile minimum: use it
+            return c2 - chi2_min - level_delta, x, bool(np.isfinite(c2))
 
         ends = []
         for sign in (-1.0, 1.0):
