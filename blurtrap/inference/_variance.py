@@ -2,9 +2,10 @@
 
 - sample variance with the correlated-sample standard error (DESIGN item 10);
 - naive and blur-corrected equipartition;
-- variance vs exposure / variance vs power: weighted least squares (optimistix
-  Levenberg-Marquardt in log parameters), weights from the model's own correlated-sample
-  standard errors, iterated;
+- variance vs exposure / variance vs power: weighted least squares (projected
+  Levenberg-Marquardt, log k/c and gamma, eps^2 >= 0 as a bound) from a global Pade-grid
+  start, weights from the model's own correlated-sample standard errors, iterated to the
+  fixed point;
 - drift: progressive ideal high-pass and extrapolation to 0 Hz (appendix B).
 """
 
@@ -14,7 +15,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from ..physics._constants import BOLTZMANN
 from ..physics._spectra import _sample_variance_var
@@ -73,49 +73,336 @@ def _predicted_se(p, a: VarianceArgs):
     return jnp.sqrt(_sample_variance_var(a.n, sigma2, tau, w, a.meta.dt, eps2))
 
 
-def _residuals(x, a_scale):
-    a, scale = a_scale
-    p = scale * jnp.exp(x)
-    return (a.v - _predicted(p, a)) / a.se
+def _eps_slope(a: VarianceArgs):
+    """d E[s^2] / d eps^2 per recording (the model is linear in eps^2): 1 - 1/N."""
+    return 1.0 - 1.0 / a.n
+
+
+def _to_params(x, scale, a: VarianceArgs, profile_eps: bool):
+    """Internal coordinates -> SI parameters.
+
+    ``x[:nk+1]`` are log(k/scale) (or log(c/scale)) and log(gamma/scale). With noise,
+    ``x[-1]`` is eps^2/scale unless ``profile_eps``: then eps^2 is projected out in closed
+    form (variable projection: the weighted least-squares eps^2 given k and gamma, clipped
+    at its bound 0), which removes the curved k-eps^2 valley that Levenberg-Marquardt
+    crawls along when the exposures hardly separate sigma^2 from eps^2."""
+    nk1 = x.shape[0] - int(a.layout.noise)
+    q = scale[:nk1] * jnp.exp(x[:nk1])
+    if not a.layout.noise:
+        return q
+    if not profile_eps:
+        return jnp.concatenate([q, scale[nk1:] * x[nk1:]])
+    f0 = _predicted(jnp.concatenate([q, jnp.zeros(1)]), a)
+    c = _eps_slope(a)
+    wt = 1.0 / a.se**2
+    e = jnp.sum(wt * c * (a.v - f0)) / jnp.sum(wt * c * c)
+    return jnp.concatenate([q, jnp.maximum(e, 0.0)[None]])
 
 
 @eqx.filter_jit
-def _lsq(a: VarianceArgs, scale, x0):
-    sol = optx.least_squares(
-        _residuals,
-        optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10),
-        x0,
-        args=(a, scale),
-        max_steps=500,
-        throw=False,
-    )
-    p = scale * jnp.exp(sol.value)
+def _resid_jac(x, scale, a: VarianceArgs, profile_eps: bool = True):
+    def res(xx):
+        return (a.v - _predicted(_to_params(xx, scale, a, profile_eps), a)) / a.se
 
-    def r_u(u):
-        return (a.v - _predicted(scale * u, a)) / a.se
-
-    jac = jax.jacfwd(r_u)(jnp.exp(sol.value))
-    fisher = jac.T @ jac
-    evals = jnp.linalg.eigvalsh(fisher)
-    pd = jnp.all(evals > 1e-12 * jnp.max(evals)) & jnp.all(jnp.isfinite(evals))
-    cov = jnp.linalg.inv(fisher) * scale[:, None] * scale[None, :]
-    res = r_u(jnp.exp(sol.value))
-    return p, jnp.where(pd, cov, jnp.nan), jnp.sum(res**2), sol.result == optx.RESULTS.successful, pd
+    return res(x), jax.jacfwd(res)(x)
 
 
-def fit_variances(args: VarianceArgs, scale, n_iter: int = 3):
-    """Iteratively reweighted least squares: weights = model SE at the current estimate.
+@eqx.filter_jit
+def _params(x, scale, a: VarianceArgs, profile_eps: bool = True):
+    return _to_params(x, scale, a, profile_eps)
 
-    The parametrisation ``p = scale * exp(x)`` keeps the start values as fixed scales (so the
-    conditioning test does not depend on how close eps^2 came to 0); each pass warm-starts.
-    """
-    p = scale
-    x = jnp.zeros_like(scale)
-    for _ in range(n_iter):
-        args = eqx.tree_at(lambda a: a.se, args, _predicted_se(p, args))
-        p, cov, chi2, ok, pd = _lsq(args, scale, x)
-        x = jnp.log(p / scale)
-    return p, cov, chi2, ok, pd
+
+@eqx.filter_jit
+def _fisher_p(p, a: VarianceArgs):
+    """J^T J of the weighted residuals in SI parameters (eps^2 free)."""
+    jac = jax.jacfwd(lambda q: (a.v - _predicted(q, a)) / a.se)(p)
+    return jac.T @ jac
+
+
+@eqx.filter_jit
+def _chi2_many(ps, a: VarianceArgs):
+    """chi^2 at each row of ``ps`` (SI parameters) with this pass's (fixed) weights."""
+    return jax.vmap(lambda p: jnp.sum(((a.v - _predicted(p, a)) / a.se) ** 2))(ps)
+
+
+@eqx.filter_jit
+def _model_se(p, a: VarianceArgs):
+    return _predicted_se(p, a)
+
+
+#: Convergence: the Gauss-Newton decrement (the chi^2 reduction a full Newton step would
+#: still bring, i.e. the squared distance to the optimum in standard errors) below this
+#: fraction of chi^2 + dof. Scale-free, and far above rounding (so it does not depend on
+#: the CPU's last bits: rounding moves the decrement by ~1e-28 relative); 1e-10 of
+#: chi^2 + dof is ~1e-5 sqrt(chi^2 + dof) standard errors from the optimum.
+_DECREMENT_RTOL = 1e-10
+#: ... and where no step lowers chi^2 any more (rounding), still accepted below this
+#: (~1e-3 SE): a statistically irrelevant distance, never a failure.
+_STALL_RTOL = 1e-6
+
+
+def _solve_lsq(a: VarianceArgs, scale, x0, free, profile_eps=True, max_iter=300, atol=0.0):
+    """Levenberg-Marquardt on the weighted residuals over the coordinates ``free`` (the
+    others held at ``x0``), host loop (problems have a handful of parameters).
+    ``atol``: also accept a decrement below this (chi^2 units; profiles need ~1e-3).
+    Returns ``(x, chi2, converged)``."""
+    x = np.asarray(x0, dtype=float).copy()
+    free = np.asarray(free, dtype=bool)
+    r, jac = map(np.asarray, _resid_jac(jnp.asarray(x), scale, a, profile_eps))
+    chi2 = float(r @ r)
+    dof = max(r.size - int(free.sum()), 0)
+    lam = 1e-3
+    for _ in range(max_iter):
+        jf = jac[:, free]
+        gf = jf.T @ r  # half the gradient of chi^2
+        hf = jf.T @ jf
+        d_gn = _safe_solve(hf, -gf)
+        if d_gn is None:
+            return x, chi2, False
+        decrement = float(-gf @ d_gn)  # chi^2 drop of the Gauss-Newton step (quadratic model)
+        if decrement <= max(_DECREMENT_RTOL * (chi2 + dof), atol):
+            return x, chi2, True
+        improved = False
+        while lam < 1e12:
+            d = _safe_solve(hf + lam * np.diag(np.diag(hf)), -gf)
+            if d is not None:
+                xn = x.copy()
+                xn[free] += np.clip(d, -3.0, 3.0)  # at most a factor e^3 per step in a log scale
+                rn, jn = map(np.asarray, _resid_jac(jnp.asarray(xn), scale, a, profile_eps))
+                cn = float(rn @ rn)
+                if np.isfinite(cn) and cn <= chi2:
+                    x, r, jac, chi2, improved = xn, rn, jn, cn, True
+                    lam = max(lam / 5.0, 1e-9)
+                    break
+            lam *= 4.0
+        if not improved:
+            # no step lowers chi^2 (rounding level): accept if the decrement is small anyway
+            return x, chi2, decrement <= max(_STALL_RTOL * (chi2 + dof), atol)
+    return x, chi2, False
+
+
+def _safe_solve(h, b):
+    if h.size == 0:
+        return np.zeros(0)
+    d = np.sqrt(np.clip(np.diag(h), 1e-300, None))
+    hs = h / d[:, None] / d[None, :]
+    try:
+        sol = np.linalg.solve(hs, b / d) / d
+    except np.linalg.LinAlgError:
+        return None
+    return sol if np.all(np.isfinite(sol)) else None
+
+
+def _layout_kinds(layout):
+    nk = 1 if layout.linear_power else layout.n_k
+    return nk, np.array([True] * (nk + 1) + [False] * int(layout.noise))
+
+
+def _pade_stiffness(v, diffusion, w, kt):
+    """Closed-form k given var(X_m) - eps^2 = v, D and W (DESIGN item 3, appendix D)."""
+    dw = diffusion * w
+    root = np.sqrt(np.clip(225.0 * v**2 + 240.0 * dw * v - 11.0 * dw**2, 0.0, None))
+    return 30.0 * kt / (2.0 * dw + 15.0 * v + root)
+
+
+def _grid_starts(a: VarianceArgs, scale):
+    """Global starts: over a log grid of D (and of eps^2 when fitted), the closed-form Pade
+    stiffness of every recording, pooled per k parameter, scored by chi^2 with fixed weights
+    (the model SE at the moment start; a candidate's own weights would favour candidates
+    that inflate their SEs). Returns candidate parameter vectors, best first."""
+    layout = a.layout
+    nk, _ = _layout_kinds(layout)
+    v = np.asarray(a.v, dtype=float)
+    n = np.asarray(a.n, dtype=float)
+    w = np.asarray(a.meta.w, dtype=float) if a.model.blur else np.zeros_like(v)
+    kt = BOLTZMANN * np.asarray(a.meta.temp, dtype=float)
+    d0 = float(np.median(kt)) / float(scale[nk])
+    d_grid = d0 * np.geomspace(1e-2, 1e2, 81)
+    e_grid = [0.0]
+    if layout.noise:
+        e_grid += list(float(np.min(v)) * np.geomspace(1e-4, 0.7, 15))
+    idx = np.asarray(layout.k_index)
+    power = np.asarray(layout.power, dtype=float)
+    e_arr = np.asarray(e_grid)[:, None, None]
+    vv = np.maximum(v - e_arr * (1.0 - 1.0 / n), 1e-3 * v)  # (E, 1, R)
+    log_k = np.log(_pade_stiffness(vv, d_grid[None, :, None], w, kt))  # (E, D, R)
+    if layout.linear_power:
+        kvec = np.exp(np.mean(log_k - np.log(power), axis=-1))[..., None]
+    else:
+        groups = (idx[None, :] == np.arange(nk)[:, None]).astype(float)  # (nk, R)
+        cnt = groups.sum(axis=1)
+        kvec = np.exp(log_k @ groups.T / np.maximum(cnt, 1.0))
+        kvec = np.where(cnt > 0, kvec, scale[:nk])
+    shape = kvec.shape[:2]
+    gam = np.broadcast_to((float(np.median(kt)) / d_grid)[None, :, None], shape + (1,))
+    parts = [kvec, gam]
+    if layout.noise:
+        parts.append(np.broadcast_to(e_arr[:, :, :1], shape + (1,)))
+    cands = np.concatenate(parts, axis=-1).reshape(-1, nk + 1 + int(layout.noise))
+    a0 = eqx.tree_at(lambda x: x.se, a, _model_se(jnp.asarray(scale), a))
+    chi2 = np.asarray(_chi2_many(jnp.asarray(cands), a0))
+    chi2 = np.where(np.isfinite(chi2), chi2, np.inf)
+    return cands[np.argsort(chi2)]
+
+
+def _internal(p, is_log, v_scale):
+    scale = np.where(is_log, p, v_scale)
+    x0 = np.where(is_log, 0.0, p / v_scale)
+    return scale, x0
+
+
+def _irls(args: VarianceArgs, p0, is_log, max_pass: int = 40):
+    """Reweighted least squares to the fixed point (weights = model SE at the estimate).
+    Returns ``(p, args, chi2, converged)``; ``args`` carries the final weights."""
+    p = np.asarray(p0, dtype=float).copy()
+    v_scale = float(np.median(np.asarray(args.v)))
+    free = np.asarray(is_log)  # eps^2 (if any) is projected out
+    for _ in range(max_pass):
+        scale, x0 = _internal(p, is_log, v_scale)
+        args = eqx.tree_at(lambda a: a.se, args, _model_se(jnp.asarray(p), args))
+        sc = jnp.asarray(scale)
+        x, chi2, ok = _solve_lsq(args, sc, x0, free)
+        if not ok:
+            return p, args, chi2, False
+        p_new = np.asarray(_params(jnp.asarray(x), sc, args))
+        # the weights' change moves the optimum: stop when a pass moves it by less than
+        # ~1e-4 sqrt(chi^2 + n) standard errors
+        dp = p_new - p
+        moved = float(dp @ np.asarray(_fisher_p(jnp.asarray(p_new), args)) @ dp)
+        p = p_new
+        if moved <= 1e2 * _DECREMENT_RTOL * (chi2 + p.size):
+            return p, args, chi2, True
+    return p, args, chi2, False
+
+
+def fit_variances(args: VarianceArgs, scale):
+    """Weighted least squares of the sample variances with the model's own correlated-frame
+    standard errors as weights, iterated to the fixed point (IRLS).
+
+    Robust by construction: eps^2 enters linearly and is projected out in closed form
+    (bounded at 0); k (or c) and gamma are fitted in log scale from the best point of a
+    global grid over D (and eps^2) with the closed-form Pade stiffness per recording, with
+    the moment start ``scale`` and further grid points as fallbacks; convergence is judged
+    by the Gauss-Newton decrement relative to chi^2 + dof (not by a rounding-level
+    tolerance). Returns ``(p, cov, chi2, converged, fisher_pd, args)`` (``args`` with the
+    final weights, for profile intervals)."""
+    _, is_log = _layout_kinds(args.layout)
+    scale = np.asarray(scale, dtype=float)
+    grid = _grid_starts(args, scale)
+    starts = [grid[0], scale] + list(grid[1:80:8])
+    best = None
+    for i, p0 in enumerate(starts):
+        if best is not None and i >= 2:
+            break
+        out = _irls(args, p0, is_log)
+        if out[-1] and (best is None or out[2] < best[2]):
+            best = out
+    if best is None:
+        nan = np.full((scale.size, scale.size), np.nan)
+        return scale, nan, np.nan, False, False, args
+    p, a, _, _ = best
+    # chi^2 and the Fisher information with the weights at the estimate itself
+    a = eqx.tree_at(lambda x: x.se, a, _model_se(jnp.asarray(p), a))
+    chi2 = float(np.asarray(_chi2_many(jnp.asarray(p)[None], a))[0])
+    fisher = np.asarray(_fisher_p(jnp.asarray(p), a))
+    dg = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
+    evals = np.linalg.eigvalsh(fisher / dg[:, None] / dg[None, :])
+    pd = bool(np.all(np.isfinite(evals)) and np.min(evals) > 1e-12 * np.max(evals))
+    cov = np.linalg.inv(fisher) if pd else np.full_like(fisher, np.nan)
+    return p, cov, float(chi2), True, pd, a
+
+
+#: Delta chi^2 of a 95 % profile interval for one parameter (chi^2_1 quantile).
+CHI2_95 = 3.841458820694124
+
+
+def profile_intervals(a: VarianceArgs, p, chi2_min, level_delta=CHI2_95, max_factor=1e3):
+    """95 % profile-likelihood (chi^2 profile) interval of every parameter, the weights held
+    at the fit's: ``{i: (low, high)}`` in SI. Each end is where the minimum of chi^2 over
+    the other parameters (eps^2 >= 0) rises by ``level_delta``; found by bracketing and
+    bisection in log scale (linear for eps^2). An end that is not reached within a factor
+    ``max_factor`` of the estimate is reported as 0 or inf (the data do not bound it);
+    eps^2 whose chi^2 at 0 is within the level gets 0. Interval ends that fail to converge
+    are NaN."""
+    _, is_log = _layout_kinds(a.layout)
+    p = np.asarray(p, dtype=float)
+    v_scale = float(np.median(np.asarray(a.v)))
+    scale, x_hat = _internal(p, is_log, v_scale)
+    sc = jnp.asarray(scale)
+    fisher = np.asarray(_fisher_p(jnp.asarray(p), a))
+    try:
+        se = np.sqrt(np.clip(np.diag(np.linalg.inv(fisher)), 0, None))
+    except np.linalg.LinAlgError:
+        se = np.abs(p) * 0.1
+    out = {}
+    n = p.size
+    for j in range(n):
+        eps_param = not is_log[j]
+        # eps^2 profiled: hold it, fit the others in log scale (no projection)
+        profile_eps = not eps_param
+        free = np.asarray(is_log).copy()
+        free[j] = False
+        step = se[j] / scale[j] if eps_param else max(se[j] / max(p[j], 1e-300), 1e-6)
+        step = step if np.isfinite(step) and step > 0 else (0.1 if not eps_param else 1e-3)
+
+        def excess(t, x_start):
+            x0 = x_start.copy()
+            x0[j] = t
+            x, c2, _ = _solve_lsq(a, sc, x0, free, profile_eps, max_iter=100, atol=1e-4)
+            # a solve that stalls (the eps^2 >= 0 kink, or a parameter running off along an
+            # unbounded direction) still gives an upper bound on the profile minimum: use it
+            return c2 - chi2_min - level_delta, x, bool(np.isfinite(c2))
+
+        ends = []
+        for sign in (-1.0, 1.0):
+            lo_t, x_lo = x_hat[j], x_hat.copy()
+            t = x_hat[j] + sign * step
+            end = np.nan
+            for _ in range(60):
+                if eps_param and t <= 0.0:
+                    f0, x0, ok = excess(0.0, x_lo)
+                    if ok and f0 <= 0:
+                        end = 0.0
+                        break
+                    t = 0.0
+                    f, xt = f0, x0
+                else:
+                    f, xt, ok = excess(t, x_lo)
+                if not ok:
+                    break
+                if f > 0:  # bracketed between lo_t (inside) and t (outside): bisect
+                    hi_t = t
+                    for _ in range(40):
+                        mid = 0.5 * (lo_t + hi_t)
+                        fm, xm, okm = excess(mid, x_lo)
+                        if not okm:
+                            break
+                        if fm > 0:
+                            hi_t = mid
+                        else:
+                            lo_t, x_lo = mid, xm
+                        if abs(hi_t - lo_t) < 0.01 * step:
+                            end = 0.5 * (lo_t + hi_t)
+                            break
+                    break
+                lo_t, x_lo = t, xt
+                far = (abs(t - x_hat[j]) > np.log(max_factor)) if not eps_param else \
+                    (abs(t - x_hat[j]) * scale[j] > max_factor * max(p[j], se[j]))
+                if far:
+                    end = -np.inf if sign < 0 else np.inf
+                    break
+                if eps_param and t == 0.0:
+                    break
+                step_t = (t - x_hat[j]) * 2.0
+                t = x_hat[j] + step_t
+            ends.append(end)
+        if eps_param:
+            lo, hi = (scale[j] * e if np.isfinite(e) or np.isnan(e) else e for e in ends)
+            lo = max(lo, 0.0) if np.isfinite(lo) else lo
+        else:
+            lo, hi = (scale[j] * np.exp(e) if not np.isnan(e) else np.nan for e in ends)
+        out[j] = (float(lo), float(hi))
+    return out
 
 
 def highpass_variance_curve(y, frame_interval, cutoffs):
