@@ -2,10 +2,10 @@
 
 - sample variance with the correlated-sample standard error (DESIGN item 10);
 - naive and blur-corrected equipartition;
-- variance vs exposure / variance vs power: weighted least squares (projected
-  Levenberg-Marquardt, log k/c and gamma, eps^2 >= 0 as a bound) from a global Pade-grid
+- variance vs exposure / variance vs power: weighted least squares (Levenberg-Marquardt in
+  log k/c and log gamma, eps^2 >= 0 projected out in closed form) from a global Pade-grid
   start, weights from the model's own correlated-sample standard errors, iterated to the
-  fixed point;
+  fixed point; 95 % profile-likelihood intervals;
 - drift: progressive ideal high-pass and extrapolation to 0 Hz (appendix B).
 """
 
