@@ -14,7 +14,6 @@ import sys
 
 _METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
             "equipartition", "allan")
-_MODELS = ("standard", "blur", "naive", "naive_aliased")
 _K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 
 
@@ -143,8 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
     c.add_argument("--method", choices=_METHODS, default="auto",
                    help="estimator (default auto: the most informative the data allow)")
-    c.add_argument("--model", choices=_MODELS, default="standard",
-                   help="trap model (default standard: blur + aliasing + tracking noise)")
+    c.add_argument("--model", type=_model_arg, default="standard",
+                   help="trap model: standard (default: blur + aliasing + tracking noise), "
+                   "blur, naive, naive_aliased, optionally with effects added by '+', e.g. "
+                   "standard+drift or standard+drift+line_noise")
     c.add_argument("--k-mode", choices=_K_MODES, default=None,
                    help="how k is shared across recordings (default: per power when powers "
                    "differ, k = cP for variance_vs_power)")
@@ -173,8 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Fit the model, test whether it describes the data, and rank the "
         "physical effects that may be missing (canonical effect names), with the evidence.")
     g.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
-    g.add_argument("--model", choices=("naive", "blur", "standard"), default="standard",
-                   help="starting model (default standard)")
+    g.add_argument("--model", type=_model_arg, default="standard",
+                   help="starting model: naive, blur, standard (default), optionally with "
+                   "effects added by '+' (e.g. standard+drift)")
     g.add_argument("--add", nargs="+", default=(), metavar="EFFECT",
                    help="effects added to the model before diagnosing (canonical names: "
                    "motion_blur, aliasing, tracking_noise, drift, line_noise, exposure_kernel, "
@@ -325,6 +327,18 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _model_arg(text: str) -> str:
+    """argparse type of ``--model``: a named model, optionally ``+effect``s (checked here, so a
+    typo is a usage error before anything is loaded or fitted)."""
+    from .inference import get_model
+
+    try:
+        get_model(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def _diagnose(args) -> int:
     from pathlib import Path
 
@@ -340,6 +354,9 @@ def _diagnose(args) -> int:
         print(dumps_json(out))
     else:
         print(d.summary())
+        print()
+        print(f"fit of the model {d.model}:")
+        print(d.fit.summary())
     return 0  # a diagnosis was made; adequacy is in the output
 
 

@@ -400,3 +400,20 @@ def test_posterior_arguments_rejected_before_fitting(bad_input_dir, capsys, monk
     rc = main(["calibrate", str(bad_input_dir / "sim" / "manifest.json"), *argv])
     assert rc == 2
     assert re.search(match, capsys.readouterr().err)
+
+
+def test_model_with_effects_and_add_report_k_and_gamma(bad_input_dir, capsys):
+    """'Add and refit' from the command line: --model accepts '+effect' (checked before any
+    fitting), and diagnose --add prints the refitted k and gamma, not only the gof."""
+    manifest = str(bad_input_dir / "sim" / "manifest.json")
+    capsys.readouterr()
+    assert main(["calibrate", manifest, "--model", "standard+drift", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["model"] == "standard+drift" and "drift_diffusion" in res["param_names"]
+    assert main(["calibrate", manifest, "--model", "standard+warp"]) == 2
+    assert "unknown effect 'warp'" in capsys.readouterr().err
+    assert main(["diagnose", manifest, "--add", "drift"]) == 0
+    text = capsys.readouterr().out
+    assert "fit of the model standard+drift:" in text
+    rows = {line.split()[0] for line in text.splitlines()[1:] if line.strip()}
+    assert {"k", "gamma", "drift_diffusion"} <= rows
