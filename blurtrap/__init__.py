@@ -124,7 +124,9 @@ _LAZY = {
 # subpackages that ``import blurtrap`` used to make available as attributes
 _SUBMODULES = ("_config", "data", "diagnostics", "inference", "physics")
 
-__all__ = sorted(_LAZY)
+# derived from _LAZY rather than written out a third time; the TYPE_CHECKING imports above
+# declare the same names to static tools
+__all__ = sorted(_LAZY)  # pyright: ignore[reportUnsupportedDunderAll]
 
 
 def __getattr__(name: str):

@@ -345,6 +345,7 @@ def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
         parser.feed(block)
     times, positions, excluded = parser.result()
     if decimal_exponent(unit) is None:
+        assert px is not None  # check_pixel_size requires a pixel size for 'px'
         positions = positions * px
     return times, positions, excluded, parser.n_lines, unit
 

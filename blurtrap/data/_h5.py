@@ -204,7 +204,7 @@ def build_recording(
         full.setdefault("defaults_applied", {})
         full["defaults_applied"] = {**full["defaults_applied"], "temperature_K": DEFAULT_TEMPERATURE}
     try:
-        return from_arrays(
+        rec = from_arrays(
             positions,
             frame_interval=frame_interval,
             exposure=exposure,
@@ -219,6 +219,8 @@ def build_recording(
         if interval_source and msg.startswith(("frame_interval = ", "exposure = ")):
             extra = f" (frame_interval = {frame_interval!r} s comes from {interval_source})"
         raise ValueError(f"{where}: {msg}{extra}") from None
+    assert isinstance(rec, Recording)  # a 1-D trace gives one recording
+    return rec
 
 
 def missing_exposure(where: str, frame_interval: float) -> ValueError:
@@ -245,6 +247,11 @@ def _datasets(h5py, f) -> list[str]:
     out: list[str] = []
     f.visititems(lambda name, obj: out.append(name) if isinstance(obj, h5py.Dataset) else None)
     return out
+
+
+def _dataset_listing(h5py, f) -> list[str]:
+    """``"<name> <shape>"`` for each dataset in the file."""
+    return [f"{n} {f[n].shape}" for n in _datasets(h5py, f)]
 
 
 def _attr_text(value):
@@ -360,7 +367,7 @@ def load_bluelake(
             frame_interval, times = 1.0 / rate, None
             meta["sample_rate_Hz"] = rate
             if "Start time (ns)" in obj.attrs:
-                meta["start_time_ns"] = int(obj.attrs["Start time (ns)"])
+                meta["start_time_ns"] = int(np.asarray(obj.attrs["Start time (ns)"]))
             source = f"the channel's 'Sample rate (Hz)' = {rate!r} Hz"
         elif kind == "TimeSeries":
             fields = obj.dtype.names or ()
@@ -477,7 +484,7 @@ def _read_1d(h5py, f, path, name: str, what: str, column):
     obj = f.get(name)
     if not isinstance(obj, h5py.Dataset):
         found = "a group, not a dataset" if isinstance(obj, h5py.Group) else "not in the file"
-        listed = [f"{n} {f[n].shape}" for n in _datasets(h5py, f)]
+        listed = _dataset_listing(h5py, f)
         raise ValueError(f"{where}: {found}; the datasets present are {_listing(listed)}")
     arr = numeric_trace(obj[()], where, what)
     if arr.ndim == 2:
@@ -625,7 +632,7 @@ def load_h5_any(path, **kwargs) -> Recording:
     h5py = _import_h5py()
     with _open(h5py, path) as f:
         bluelake = is_bluelake(f)
-        listed = [f"{n} {f[n].shape}" for n in _datasets(h5py, f)]
+        listed = _dataset_listing(h5py, f)
     if bluelake:
         return load_bluelake(path, **kwargs)
     raise ValueError(

@@ -81,11 +81,6 @@ def from_arrays(
         except (TypeError, ValueError):
             return p  # let Recording report it
 
-    common = dict(
-        allow_irregular=allow_irregular,
-        timing_tolerance=timing_tolerance,
-        check_units=check_units,
-    )
     if raw.ndim == 1:
         return Recording(
             pos,
@@ -96,7 +91,9 @@ def from_arrays(
             laser_power=power(laser_power),
             metadata=meta,
             name=name,
-            **common,
+            allow_irregular=allow_irregular,
+            timing_tolerance=timing_tolerance,
+            check_units=check_units,
         )
     n = raw.shape[0]
     fis = _per_row("frame_interval", frame_interval, n)
@@ -135,7 +132,9 @@ def from_arrays(
                     laser_power=power(powers[i]),
                     metadata=meta,
                     name=names[i],
-                    **common,
+                    allow_irregular=allow_irregular,
+                    timing_tolerance=timing_tolerance,
+                    check_units=check_units,
                 )
             )
         except ValueError as e:

@@ -16,6 +16,7 @@ import os
 import re
 from decimal import Decimal
 from pathlib import Path
+from typing import Any
 
 from .._constants import DEFAULT_TEMPERATURE
 from ._csv import load_csv, write_csv
@@ -40,7 +41,7 @@ _ENTRY_KEYS = (
 _LOADER_KEYS = ("source", "excluded_rows", "defaults_applied", "position_unit")
 
 
-def _plain(obj):
+def _plain(obj) -> Any:
     """Decimals from the JSON parser -> float, recursively."""
     if isinstance(obj, Decimal):
         return float(obj)
@@ -263,7 +264,9 @@ def save_manifest(
             entry["laser_power_mW"] = token
         # always written: a missing name would come back as the file stem (null stays None)
         entry["name"] = r.name
-        meta = {k: v for k, v in thaw(r.metadata).items() if k not in _LOADER_KEYS + ("manifest",)}
+        plain = thaw(r.metadata)
+        assert isinstance(plain, dict)  # thaw maps a mapping to a dict
+        meta = {k: v for k, v in plain.items() if k not in _LOADER_KEYS + ("manifest",)}
         if meta:
             entry["metadata"] = meta
         if r.allow_irregular:

@@ -59,7 +59,8 @@ def save_npz(recordings: Recording | RecordingSet, path, *, compress: bool = Fal
     header = {"format": _FORMAT, "version": _VERSION, "kind": kind, "recordings": entries}
     arrays[_HEADER_KEY] = np.array(json.dumps(header))
     with open(os.fspath(path), "wb") as f:
-        (np.savez_compressed if compress else np.savez)(f, **arrays)
+        # the array names (positions_<i>, times_<i>, __blurtrap__) never collide with allow_pickle
+        (np.savez_compressed if compress else np.savez)(f, **arrays)  # pyright: ignore[reportArgumentType]
 
 
 def load_npz(

@@ -454,7 +454,9 @@ class Recording:
             raise ValueError(
                 f"metadata must be a dict (or None); got {type(metadata).__name__} {metadata!r:.60}"
             )
-        meta = dict(_freeze({} if metadata is None else metadata))
+        frozen = _freeze({} if metadata is None else metadata)
+        assert isinstance(frozen, types.MappingProxyType)  # _freeze maps a dict to a mapping proxy
+        meta = dict(frozen)
         if dtype_note is not None:
             meta.setdefault("input_dtype", dtype_note)
         if times is None:

@@ -109,7 +109,7 @@ class RecordingSet(Sequence):
         groups: dict[float | None, list[Recording]] = {}
         for r in self._recordings:
             groups.setdefault(r.laser_power, []).append(r)
-        keys = sorted(k for k in groups if k is not None)
+        keys: list[float | None] = list(sorted(k for k in groups if k is not None))
         if None in groups:
             keys.append(None)
         return {k: RecordingSet(groups[k]) for k in keys}

@@ -26,7 +26,7 @@ TDMS_INSTALL = 'pip install "blurtrap[tdms]"'
 
 def _import_nptdms():
     try:
-        import nptdms
+        import nptdms  # pyright: ignore[reportMissingImports]  # optional dependency
     except ImportError as e:
         raise ImportError(
             "reading TDMS files needs npTDMS, an optional dependency of blurtrap; install it with "

@@ -77,6 +77,7 @@ def to_metres(values, unit: str, pixel_size_m: float | None = None) -> np.ndarra
     arr = np.array(values, dtype=np.float64, copy=True)
     p = _DECIMAL_EXPONENT[unit]
     if p is None:
+        assert pixel_size_m is not None, "unit 'px' needs pixel_size_m (see check_pixel_size)"
         return arr * pixel_size_m
     if p:
         arr /= 10.0**p  # 10**p is exact in float64: one correctly rounded division
@@ -88,6 +89,7 @@ def from_metres(values, unit: str, pixel_size_m: float | None = None) -> np.ndar
     arr = np.array(values, dtype=np.float64, copy=True)
     p = _DECIMAL_EXPONENT[unit]
     if p is None:
+        assert pixel_size_m is not None, "unit 'px' needs pixel_size_m (see check_pixel_size)"
         return arr / pixel_size_m
     if p:
         arr *= 10.0**p

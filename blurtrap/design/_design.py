@@ -252,13 +252,14 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
                 raise ValueError(f"current: each recording needs 0 < exposure <= frame "
                                  f"interval; got ({dt}, {w}, {n})")
         cands.append(_acquisition("your current design", cur, *common))
+    budget = total_time if total_time is not None else n_frames
+    assert budget is not None  # exactly one of n_frames / total_time is given (checked above)
     for n_exp in series:
         if isinstance(n_exp, bool) or not isinstance(n_exp, (int, np.integer)) or n_exp < 1:
             raise ValueError(f"series must hold whole numbers of exposures >= 1; got {n_exp!r}")
         prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
                         dead=jnp.asarray(float(dead_time)),
-                        budget=jnp.asarray(float(total_time if total_time is not None
-                                                 else n_frames)),
+                        budget=jnp.asarray(float(budget)),
                         ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
                         temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
                         w_ref=jnp.asarray(w_ref), n_exp=int(n_exp),

@@ -42,7 +42,7 @@ _U, _UW = _nodes()
 
 def _has_noise(tracking_var) -> bool:
     """eps^2 is a parameter unless it is a concrete zero (then the model has no noise term)."""
-    if isinstance(tracking_var, jax.core.Tracer):
+    if isinstance(tracking_var, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]
         return True
     return bool(np.any(np.asarray(tracking_var) > 0))
 

@@ -52,21 +52,21 @@ class BatchCalibration:
     model: str
     #: per item: p-value of the binned spectral goodness-of-fit test of ``calibrate``
     #: (``result.gof``), NaN where no fit was made or the spectrum has fewer than one bin
-    gof_p: np.ndarray = None
+    gof_p: np.ndarray | None = None
     #: per item: its chi^2 statistic (``gof_dof`` degrees of freedom, the same for all items)
-    gof_statistic: np.ndarray = None
+    gof_statistic: np.ndarray | None = None
     gof_dof: int = 0
     #: items with ``gof_p`` below this are "inadequate"
     gof_threshold: float = GOF_THRESHOLD
     #: per item: lag-1 correlation of the frames in standard errors (``r1 sqrt(N)``); below
     #: 5 the frames carry no temporal information and the item is refused
-    lag1_z: np.ndarray = None
+    lag1_z: np.ndarray | None = None
     #: per item ("ok" items only): a parameter, as a rule tracking_var, was held at its lower
     #: bound 0 (``calibrate``'s ``result.at_bounds``), and the other errors are conditional
     #: on it. They can then be far too small: of 400 simulated camera records (k = 5e-5 N/m,
     #: W = dt = 1/1500 s, 2 nm tracking noise, 65 536 frames) 43 had eps^2 at 0, and all 43
     #: had k 5-20 SE off (about 0.86 k), the same fits as ``calibrate`` returns
-    at_bound: np.ndarray = None
+    at_bound: np.ndarray | None = None
 
     def __len__(self):
         return len(self.k)
@@ -163,7 +163,7 @@ def _prepare(y, n_blocks, m, dt, w, temp, noise, check_units):
         power[skip] = power[~skip].mean(axis=0) if (~skip).any() else 1e-20
         mom[:, skip] = _lag_moments(power[skip], m, dt)
         avg[skip] = power[skip].mean(axis=1)
-    starts = _moment_starts(*mom, dt, w, temp)
+    starts = _moment_starts(mom[0], mom[1], mom[2], dt, w, temp)
     if not noise:
         starts = starts[:, :2]
     return power, starts, np.log(avg), stats, pre
@@ -368,7 +368,8 @@ def calibrate_batch(
     gof[skip, 0] = np.nan  # not fitted: no test
     gof_p = checks.gof_p_values(gof[:, 0], gof_dof) if nbin > 0 else np.full(b, np.nan)
     for i in np.flatnonzero((status == "ok") & ~skip & (gof_p < gof_threshold)):
-        status[i] = checks.inadequate_status(gof_p[i], *gof[i, 1:], f, per, n_blocks)
+        status[i] = checks.inadequate_status(gof_p[i], gof[i, 1], gof[i, 2], gof[i, 3], gof[i, 4],
+                                             f, per, n_blocks)
     status[skip] = pre[skip]
     refused = np.array([s.startswith(("invalid", "refused", "inadequate", "constant"))
                         for s in status])

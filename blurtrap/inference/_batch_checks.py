@@ -19,8 +19,8 @@ from ._fit import chi2_sf
 
 # The unit-slip thresholds of ``Recording`` (blurtrap/data/_recording.py; a test holds them
 # equal): a batch row is checked like a Recording built from it.
-MAX_POSITION_STD_M = 1e-3
-MAX_INTERVAL_S = 1.0
+MAX_POSITION_STD_M = 1e-5
+MAX_INTERVAL_S = 0.1
 MIN_TEMPERATURE_K = 100.0
 #: lag-1 correlation (in standard errors) below which the frames carry no temporal
 #: information, the threshold of ``calibrate`` (``temporal_information``)
@@ -40,8 +40,8 @@ def check_shared(dt: float, w: float, t: float, check_units: bool) -> None:
     if not check_units:
         return
     for name, v in (("frame_interval", dt), ("exposure", w)):
-        if v > MAX_INTERVAL_S:
-            raise ValueError(f"{name} = {v!r} s is longer than 1 s: this looks like ms, not s "
+        if v >= MAX_INTERVAL_S:
+            raise ValueError(f"{name} = {v!r} s is at least 0.1 s: this looks like ms, not s "
                              f"(did you mean {v * 1e-3!r} s?). Pass seconds, or "
                              "check_units=False")
     if t < MIN_TEMPERATURE_K:
@@ -90,7 +90,7 @@ def prefit_status(stats: np.ndarray, check_units: bool) -> np.ndarray:
             status[i] = "constant trace"
         elif check_units and std[i] > MAX_POSITION_STD_M:
             status[i] = (f"invalid: positions look like nm or pixels, not m (std {std[i]:.3g} m "
-                         "> 1 mm)")
+                         "> 10 um)")
         else:
             status[i] = (f"refused: no temporal information (lag-1 correlation {z[i]:.1f} SE "
                          "above 0: dt >> tau, or tracking noise swamps the motion); gamma not "

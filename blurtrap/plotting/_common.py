@@ -8,11 +8,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ..inference._result import LAB
 from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 # name -> (factor from SI, lab unit, pretty label); `c` is k per laser power
 _SYMBOLS = {"k": "k", "c": "c = k/P", "gamma": "gamma", "diffusion": "D",
@@ -58,6 +63,12 @@ def new_figure(nrows=1, ncols=1, *, figsize=None, ax=None, fig=None, **kw):
     kw.setdefault("squeeze", True)
     axes = fig.subplots(nrows, ncols, **kw)
     return fig, axes
+
+
+def new_axes(*, figsize=None, ax=None) -> tuple[Figure, Axes]:
+    """:func:`new_figure` for a one-axes plot: the figure and its single axes."""
+    fig, axes = new_figure(figsize=figsize, ax=ax)
+    return fig, cast("Axes", axes)
 
 
 def save(fig, path, **kw):

@@ -15,6 +15,7 @@ from ._common import (
     lab,
     model_name,
     model_psd,
+    new_axes,
     new_figure,
 )
 
@@ -30,6 +31,7 @@ def _inner_ticks_locator():
             super().__init__(nbins=3)
 
         def __call__(self):
+            assert self.axis is not None  # matplotlib calls a locator only once it is set on an axis
             lo, hi = sorted(self.axis.get_view_interval())
             m = 0.12 * (hi - lo)
             for nb in (3, 5):
@@ -266,7 +268,7 @@ def naive_error_map(k_grid, w_grid, error, *, ax=None,
         )
     from matplotlib.colors import TwoSlopeNorm
 
-    fig, ax = new_figure(figsize=(6.0, 4.6), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.6), ax=ax)
     pct = 100.0 * e
     vmin = min(float(np.nanmin(pct)), -1e-6)
     vmax = max(float(np.nanmax(pct)), 1e-6)
@@ -376,7 +378,7 @@ def diagnose_ranking(ranking, *, ax=None, thresholds=None):
 
     rows, diag = _ranking_rows(ranking)
     rows = [r for _, r in sorted(enumerate(rows), key=_ranking_key)]
-    fig, ax = new_figure(figsize=(9.0, 0.45 * max(len(rows), 2) + 1.7), ax=ax)
+    fig, ax = new_axes(figsize=(9.0, 0.45 * max(len(rows), 2) + 1.7), ax=ax)
     ax.set_xlabel(AIC_LABEL, fontsize=8)
     ax.set_title(_verdict_title(diag, rows), fontsize=9)
     if not rows:

@@ -25,6 +25,7 @@ from ._common import (
     kT,
     model_name,
     model_psd,
+    new_axes,
     new_figure,
     normal_pdf,
     sample_variance_se_np,
@@ -101,7 +102,7 @@ def fig1a_universal_curve(
         )
     n_tr, n = p.shape[2], p.shape[3]
     v = np.var(p, axis=-1).mean(axis=-1)  # (S, n_win)
-    fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.4), ax=ax)
     markers = "osD^vP*X"
     a_all = []
     for i in range(n_set):
@@ -149,7 +150,7 @@ def fig1b_histogram(recording, params, *, bins=60, ax=None):
     alpha = float(recording.exposure) * k / g
     var_blur = (sigma2 * float(blur_factor_np(alpha)) + e2) * NM2
     var_free = (sigma2 + e2) * NM2
-    fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.4), ax=ax)
     ax.hist(x, bins=bins, density=True, color="0.75", edgecolor="0.5",
             label=f"frames (N = {x.size}), var = {np.var(x):.4g} nm$^2$")
     lim = 4.5 * math.sqrt(var_free)
@@ -207,7 +208,7 @@ def fig3_fractional_variance(recordings, params, *, ax=None):
     groups: dict = {}
     for r, kk in zip(recs, ks, strict=True):
         groups.setdefault(r.laser_power, []).append((r, kk))
-    fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.4), ax=ax)
     markers = "os^Dv<>P"
     a_all = []
     for j, (power, items) in enumerate(sorted(groups.items(),
@@ -273,7 +274,7 @@ def fig4_stiffness_vs_power(
     if any(r.laser_power is None for r in recs):
         raise ValueError("fig4_stiffness_vs_power needs laser_power [W] on every recording")
     powers = sorted({float(r.laser_power) for r in recs})
-    fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.4), ax=ax)
     pmax = max(powers)
     pp = np.linspace(0.0, 1.1 * pmax, 200)
 
@@ -403,7 +404,7 @@ def fig5_highpass(
     grid = np.linspace(0.0, fm, 300)
     vg = highpass_variance_curve(y, dt, grid)
     v_unf = float(np.var(y))
-    fig, ax = new_figure(figsize=(6.0, 4.4), ax=ax)
+    fig, ax = new_axes(figsize=(6.0, 4.4), ax=ax)
     ax.plot(grid, vg * NM2, color="0.55", lw=1.0, label="variance after ideal high-pass")
     ax.plot(cut, v * NM2, "o", color="C0", ms=4, label="fitted cut-offs")
     fl = np.linspace(0.0, cut.max(), 50)
@@ -465,7 +466,7 @@ def fig6_psd(recording, fits=None, *, n_blocks=None, one_sided=True, ax=None):
     nb = fit_n_blocks(next(iter(fm.values())) if fm else None, recording, n_blocks)
     f, p, nb = blocked_psd(recording, nb)
     fac = 2.0 if one_sided else 1.0
-    fig, ax = new_figure(figsize=(6.4, 4.6), ax=ax)
+    fig, ax = new_axes(figsize=(6.4, 4.6), ax=ax)
     ax.loglog(f, fac * p * NM2, ".", color="0.35", ms=3,
               label=f"data: {nb} blocks of {recording.n_frames // nb} frames")
     for label, fit in fm.items():
