@@ -722,7 +722,7 @@ def _fit_variance(recs, layout, model, method_name, notes):
     if unbounded:
         notes.append(f"{method_name}: the data do not bound {unbounded} within a factor 1000 "
                      "(weakly identified: exposures or powers too close, or alpha << 1)")
-    extras = {"intervals": intervals}
+    extras: dict[str, Any] = {"intervals": intervals}
     try:
         jse = _joint_likelihood_se(recs, layout, model, p)
         nk = 1 if layout.linear_power else layout.n_k
@@ -1108,16 +1108,16 @@ def _bead_radii(recs) -> list:
             out.append(None)
             continue
         ok = isinstance(rad, numbers.Real) and not isinstance(rad, bool) and \
-            math.isfinite(rad) and rad > 0
+            math.isfinite(float(rad)) and float(rad) > 0
         if not ok:
             raise ValueError(f"recording {i}: metadata['bead_radius_m'] must be a bead radius "
                              f"in m (> 0, finite); got {rad!r}")
-        if rad > 1e-3:
+        if float(rad) > 1e-3:
             raise ValueError(f"recording {i}: metadata['bead_radius_m'] = {rad!r} m is "
                              f"implausibly large: it looks like um or nm (1 um = 1e-6 m)")
         eta = meta.get("viscosity_Pa_s")
         if eta is not None and not (isinstance(eta, numbers.Real) and not isinstance(eta, bool)
-                                    and math.isfinite(eta) and eta > 0):
+                                    and math.isfinite(float(eta)) and float(eta) > 0):
             raise ValueError(f"recording {i}: metadata['viscosity_Pa_s'] must be > 0 (Pa s); "
                              f"got {eta!r}")
         out.append((float(rad), None if eta is None else float(eta)))

@@ -150,6 +150,7 @@ class CalibrationResult:
                 ivs.update(more)
                 kinds.update(more_kinds)
             object.__setattr__(self, "_interval_cache", (ivs, kinds))
+            return ivs, kinds
         return self._interval_cache
 
     @property

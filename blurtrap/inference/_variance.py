@@ -257,6 +257,7 @@ def _irls(args: VarianceArgs, p0, is_log, max_pass: int = 40):
     p = np.asarray(p0, dtype=float).copy()
     v_scale = float(np.median(np.asarray(args.v)))
     free = np.asarray(is_log)  # eps^2 (if any) is projected out
+    chi2 = np.inf  # (max_pass >= 1 always sets it)
     for _ in range(max_pass):
         scale, x0 = _internal(p, is_log, v_scale)
         args = eqx.tree_at(lambda a: a.se, args, _model_se(jnp.asarray(p), args))
