@@ -355,6 +355,8 @@ def calibrate_batch(
     gof_dof = max(nbin - n_par, 1)
     z = stats[:, 5]
     status = np.full(b, "ok", dtype=object)
+    # a singular information is the symptom; an unresolved relaxation (below) its cause
+    status[~pd] = "singular Fisher information"
     with np.errstate(divide="ignore", invalid="ignore"):
         unresolved = ~(val[:, 1] / val[:, 0] < m * dt / 3.0)
     status[unresolved] = "relaxation not resolved"
@@ -363,7 +365,6 @@ def calibrate_batch(
     no_info = unresolved & (z < 0.5 * math.sqrt(n))
     for i in np.flatnonzero(no_info):
         status[i] = checks.no_information_status(z[i])
-    status[~pd] = "singular Fisher information"
     status[~converged] = "not converged"
     gof[skip, 0] = np.nan  # not fitted: no test
     gof_p = checks.gof_p_values(gof[:, 0], gof_dof) if nbin > 0 else np.full(b, np.nan)
