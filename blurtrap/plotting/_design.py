@@ -9,6 +9,9 @@ from .._config import float64_scope
 from ._common import MS
 
 _MARKERS = ("*", "o", "s", "^", "D", "v", "P", "X")
+#: SEs above this [%] are not drawn: such a design does not identify the parameter (the
+#: information matrix is near singular and its inverse is numerical noise)
+_SE_CAP = 1e3
 
 
 @float64_scope
@@ -40,7 +43,9 @@ def _single_se(result, exposures, intervals):
         return jnp.max(jnp.stack(se), axis=0)
 
     out = jax.jit(jax.vmap(one))(jnp.asarray(exposures), jnp.asarray(intervals))
-    return np.asarray(out)
+    out = np.array(out, dtype=float)
+    out[~(out * 100 <= _SE_CAP)] = np.nan
+    return out
 
 
 def _target_se(cand, target):
@@ -93,6 +98,7 @@ def design_se(result, ax=None):
         x = float(np.exp(np.mean(np.log(exps)))) * MS
         y = 100 * _target_se(c, result.target)
         best = c is result.best
+        bad = "" if np.isfinite(y) and y <= _SE_CAP else " (SE > 1000 % or not finite)"
         color = "C3" if best else f"C{(i % 6) + 4}"
         if len(exps) > 1 and exps.max() > exps.min() * 1.001:
             ax_w.plot([exps.min() * MS, exps.max() * MS], [y, y], "-", color=color, lw=1,
@@ -102,7 +108,10 @@ def design_se(result, ax=None):
             f"{r[0] * MS:.3g}" for r in c.recordings[:1]) + " ms)"
         ax_w.plot([x], [y], _MARKERS[0] if best else _MARKERS[1 + i % 7], color=color,
                   ms=14 if best else 8, ls="none", gid="candidate",
-                  label=("recommended: " if best else "") + c.label + other_dt)
+                  label=("recommended: " if best else "") + c.label + other_dt + bad)
+    if not np.isfinite(se_w).any():
+        ax_w.text(0.5, 0.5, "one recording: SE > 1000 % at every W", ha="center",
+                  transform=ax_w.transAxes, fontsize=8)
     ax_w.set_xscale("log")
     ax_w.set_yscale("log")
     ax_w.set_xlabel(f"exposure W [ms] (dt = {dt_best * MS:.3g} ms)")
@@ -125,7 +134,10 @@ def design_se(result, ax=None):
         ax_dt.xaxis.set_minor_formatter(NullFormatter())
         finite = se_dt[np.isfinite(se_dt) & (se_dt > 0)]
         if finite.size:
-            ax_dt.set_ylim(0.7 * finite.min(), min(1.5 * finite.max(), 1e3))
+            ax_dt.set_ylim(0.7 * finite.min(), min(1.5 * finite.max(), _SE_CAP))
+        else:
+            ax_dt.text(0.5, 0.5, "one recording: SE > 1000 % at every dt", ha="center",
+                       transform=ax_dt.transAxes, fontsize=8)
         ax_dt.set_xlabel("frame interval dt [ms] (W = dt" + (" - dead time)" if dead else ")"))
         ax_dt.set_ylabel("predicted relative SE [%]")
         ax_dt.set_title("one recording, W = dt", fontsize=9)

@@ -79,3 +79,34 @@ def test_design_figure_draws_into_given_axes():
         assert len(candidate_markers(ax)) == len(r.candidates)
     finally:
         plt.close(fig0)
+
+
+def test_design_figure_of_a_design_that_identifies_little():
+    """dt >> tau (k 0.5 pN/nm at 500 fps): one W = dt recording does not separate gamma from
+    eps^2 (singular information). The figure still marks every candidate, says which SE is
+    not finite or above 1000 %, and draws no curve above 1000 %."""
+    k, dt = 5e-4, 1 / 500
+    common = ((k,), GAMMA, 295.0, 4e-18, dt, False, "k")
+    cands = [_acquisition("optimised series of 2 exposures",
+                          [(dt, 9.4e-6, 32768), (dt, dt, 32768)], *common),
+             _acquisition("W = dt at the fastest frame rate", [(dt, dt, 65536)], *common)]
+    settings = {"gamma_N_s_per_m": GAMMA, "temperature_K": 295.0, "max_fps_Hz": 500.0,
+                "min_exposure_s": 1e-6, "dead_time_s": 0.0, "n_frames": None,
+                "total_time_s": 65536 * dt, "tracking_std_m": 2e-9, "photon_limited": False,
+                "reference_exposure_s": dt, "kT_J": 4e-21}
+    r = DesignResult(best=cands[0], candidates=tuple(cands), target="k", k=(k,),
+                     settings=settings)
+    fig = bp.design_se(r)
+    try:
+        ax_w, ax_dt = fig.axes[:2]
+        marks = candidate_markers(ax_w)
+        assert len(marks) == 2
+        assert np.isfinite(marks[0].get_ydata()[0])
+        assert "not finite" in marks[1].get_label()
+        for ax in (ax_w, ax_dt):
+            for ln in ax.get_lines():
+                if ln.get_gid() != "candidate":
+                    y = np.asarray(ln.get_ydata(), dtype=float)
+                    assert not (y[np.isfinite(y)] > 1e3).any()
+    finally:
+        plt.close(fig)
