@@ -109,6 +109,9 @@ def design_se(result, ax=None):
         ax_w.plot([x], [y], _MARKERS[0] if best else _MARKERS[1 + i % 7], color=color,
                   ms=14 if best else 8, ls="none", gid="candidate",
                   label=("recommended: " if best else "") + c.label + other_dt + bad)
+    shown = [ln.get_ydata() for ln in ax_w.get_lines()]
+    if not any(np.isfinite(np.asarray(y, dtype=float)).any() for y in shown):
+        ax_w.set_ylim(1.0, _SE_CAP)  # nothing to scale the log axis to
     if not np.isfinite(se_w).any():
         ax_w.text(0.5, 0.5, "one recording: SE > 1000 % at every W", ha="center",
                   transform=ax_w.transAxes, fontsize=8)
@@ -135,7 +138,8 @@ def design_se(result, ax=None):
         finite = se_dt[np.isfinite(se_dt) & (se_dt > 0)]
         if finite.size:
             ax_dt.set_ylim(0.7 * finite.min(), min(1.5 * finite.max(), _SE_CAP))
-        else:
+        else:  # nothing to scale the log axis to
+            ax_dt.set_ylim(1.0, _SE_CAP)
             ax_dt.text(0.5, 0.5, "one recording: SE > 1000 % at every dt", ha="center",
                        transform=ax_dt.transAxes, fontsize=8)
         ax_dt.set_xlabel("frame interval dt [ms] (W = dt" + (" - dead time)" if dead else ")"))

@@ -1,6 +1,7 @@
 """The design figure: made through pyplot unless `ax=` says where, axes in lab units (ms, %),
 one marker per candidate the design compared (the recommended one first, as a star)."""
 
+import io
 import math
 
 import matplotlib.pyplot as plt
@@ -108,5 +109,6 @@ def test_design_figure_of_a_design_that_identifies_little():
                 if ln.get_gid() != "candidate":
                     y = np.asarray(ln.get_ydata(), dtype=float)
                     assert not (y[np.isfinite(y)] > 1e3).any()
+        fig.savefig(io.BytesIO(), format="png")  # the log axes can be drawn
     finally:
         plt.close(fig)
