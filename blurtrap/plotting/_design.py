@@ -106,7 +106,7 @@ def design_se(result, ax=None):
         dts = {round(r[0] / dt_best, 6) for r in c.recordings}
         other_dt = "" if dts == {1.0} else " (dt = " + ", ".join(
             f"{r[0] * MS:.3g}" for r in c.recordings[:1]) + " ms)"
-        ax_w.plot([x], [y], _MARKERS[0] if best else _MARKERS[1 + i % 7], color=color,
+        ax_w.plot([x], [y if not bad else np.nan], _MARKERS[0] if best else _MARKERS[1 + i % 7], color=color,
                   ms=14 if best else 8, ls="none", gid="candidate",
                   label=("recommended: " if best else "") + c.label + other_dt + bad)
     shown = [ln.get_ydata() for ln in ax_w.get_lines()]
