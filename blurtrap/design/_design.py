@@ -64,6 +64,13 @@ class DesignResult:
         """Relative SE of each parameter for the recommended design (worst over the k range)."""
         return {n: float(np.max(v)) for n, v in self.best.predicted_se.items()}
 
+    def plot(self, ax=None):
+        """Predicted SE against exposure and frame interval, candidates marked
+        (:func:`blurtrap.plotting.design_se`; imports matplotlib). Returns the figure."""
+        from ..plotting._design import design_se
+
+        return design_se(self, ax=ax)
+
     def to_dict(self) -> dict:
         return {"target": self.target, "k_N_per_m": list(self.k), "settings": self.settings,
                 "best": self.best.to_dict(),

@@ -16,11 +16,13 @@ The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 :func:`fig1b_histogram`, :func:`fig3_fractional_variance`, :func:`fig4_stiffness_vs_power`,
 :func:`fig5_highpass`, :func:`fig6_psd`, :func:`fig7_deviation`. Beyond it: :func:`corner`,
 :func:`residuals_before_after`, :func:`naive_error_map`, :func:`diagnose_ranking`.
+Experiment design: :func:`design_se` (also ``DesignResult.plot()``).
 """
 
 from ._common import LAB_UNITS as LAB_UNITS
 from ._common import close as close
 from ._common import save as save
+from ._design import design_se as design_se
 from ._extra import (
     corner as corner,
 )
@@ -59,6 +61,7 @@ __all__ = [
     "LAB_UNITS",
     "close",
     "corner",
+    "design_se",
     "diagnose_ranking",
     "fig1a_universal_curve",
     "fig1b_histogram",
