@@ -26,6 +26,8 @@ from ..physics._effects import water_viscosity
 from ._fisher import whittle_information
 
 TARGETS = ("k", "gamma", "both")
+#: a relative SE of k or gamma above this (100 %) means the design does not identify it
+UNIDENTIFIED_SE = 1.0
 #: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
 PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
 
@@ -172,6 +174,13 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
     se = np.asarray(_relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited))
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
     obj = float(_objective_from_se(jnp.asarray(se), target))
+    core = se[:, :2]
+    if not np.all(np.isfinite(core)) or np.any(core > UNIDENTIFIED_SE) or not np.isfinite(obj):
+        # k or gamma not identified (dt >> tau on one exposure, a near-singular information):
+        # the SE of the target alone would be a confident-looking number of a fit that cannot
+        # be made, so such a design is never recommended
+        obj = math.inf
+        label += " (k or gamma not identified)"
     return Acquisition(label, recs, {n: se[:, i] for i, n in enumerate(names)}, obj)
 
 
@@ -283,7 +292,12 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
         label = "optimised single recording" if n_exp == 1 else \
             f"optimised series of {n_exp} exposures"
         cands.append(_acquisition(label, prob.recs(best_u), *common))
-    cands.sort(key=lambda c: c.objective)
+    cands.sort(key=lambda c: c.objective)  # unidentified designs (objective inf) last
+    if not math.isfinite(cands[0].objective):
+        raise ValueError("no candidate design identifies both k and gamma under these "
+                         "constraints (dt >> tau at the fastest frame rate?): allow a faster "
+                         "frame rate or shorter exposures, or give gamma from the bead size "
+                         "and calibrate k by blur-corrected equipartition")
     settings = {"gamma_N_s_per_m": gamma, "temperature_K": temperature, "max_fps_Hz": max_fps,
                 "min_exposure_s": w_min, "dead_time_s": dead_time, "n_frames": n_frames,
                 "total_time_s": total_time, "tracking_std_m": tracking_std,

@@ -95,3 +95,11 @@ def test_design_validates_its_arguments():
         bt.design(k=K, gamma=GAMMA, max_fps=-1, n_frames=4096)
     with pytest.raises(ValueError, match="photon_limited"):
         bt.design(k=K, gamma=GAMMA, max_fps=1500, n_frames=4096, photon_limited=True)
+
+
+def test_design_never_recommends_an_unidentified_design():
+    """500 fps, k = 0.5 pN/nm (dt/tau ~ 36): no candidate identifies gamma (relative SE
+    > 100 %); before, the W = dt candidate with a NaN objective was sorted first and the
+    optimised series (gamma SE 241 %) was recommended for k."""
+    with pytest.raises(ValueError, match="identifies both k and gamma"):
+        bt.design(k=5e-4, radius=1.53e-6, max_fps=500, total_time=60.0, tracking_std=2e-9)
