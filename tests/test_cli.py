@@ -167,8 +167,13 @@ def test_format_result_lab_units():
         temperature=295.0, k_per_recording=np.array([1e-5, 2e-5]),
         k_per_recording_err=np.array([1e-7, 2e-7]), gof={}, n_recordings=2, n_frames=100)
     table = format_result(res)
-    rows = {ln.split()[0]: ln.split() for ln in table.splitlines()[2:]}
+    # the 95 % interval column (after the unit) is parsed apart from the value columns
+    rows = {ln.split()[0]: ln.split("[")[0].split() for ln in table.splitlines()[2:]}
     assert float(rows["c"][1]) == pytest.approx(0.1) and rows["c"][-1] == "pN/nm/W"
+    c_line = next(ln for ln in table.splitlines() if ln.split()[:1] == ["c"])
+    lo, hi = (float(v) for v in c_line.split("[")[1].split("]")[0].split(","))
+    assert (lo, hi) == (pytest.approx(0.1 - 1.96 * 0.001, rel=1e-3),
+                        pytest.approx(0.1 + 1.96 * 0.001, rel=1e-3))  # lab units too
     assert float(rows["gamma"][1]) == pytest.approx(0.0274)
     assert " ".join(rows["gamma"][-2:]) == "pN s/um"
     assert float(rows["tracking_var"][1]) == pytest.approx(4.0)

@@ -57,11 +57,28 @@ def blurtrap_imports(path: pathlib.Path, layer: str):
                         yield alias.name, node.lineno
 
 
+def _function_scope_lines(path: pathlib.Path) -> set[int]:
+    """Line numbers of import statements inside a function body (lazy imports)."""
+    lines = set()
+    for fn in ast.walk(ast.parse(path.read_text())):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            lines |= {n.lineno for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))}
+    return lines
+
+
+#: a result object's ``plot()`` method may import plotting lazily, inside the method: the
+#: layer itself never loads matplotlib (test_import_is_light) and plotting never imports it back
+LAZY_PLOTTING = {"design"}
+
+
 @pytest.mark.parametrize("layer", sorted(ALLOWED))
 def test_import_direction(layer):
     bad = []
     for path in (PKG / layer).rglob("*.py"):
+        lazy = _function_scope_lines(path)
         for target, line in blurtrap_imports(path, layer):
+            if target == "plotting" and layer in LAZY_PLOTTING and line in lazy:
+                continue
             if target != layer and target not in ALLOWED[layer]:
                 bad.append(f"{path.relative_to(PKG.parent)}:{line} imports blurtrap.{target}")
     assert not bad, "\n".join(bad)

@@ -492,6 +492,29 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None):
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
             f"not all identifiable from these data; {why}." + hint
         )
+    lost = _unidentified(out, names)
+    if lost and strict:
+        # with a nuisance parameter at its bound the information of the others is finite,
+        # but an SE above the value itself carries no information (white frames, dt >> tau:
+        # k 4.4 +- 86 pN/nm): refuse as for a singular information, naming the cause
+        why = _singular_fisher_causes(recs, np.asarray(out.value), names)
+        raise FitError(
+            f"{method} fit: the Fisher information is singular in effect - {lost} have "
+            f"standard errors above their values and are not identifiable from these data; "
+            f"{why}." + hint
+        )
+
+
+#: k (or c) or gamma with a relative SE above this is not identified by the data
+MAX_RELATIVE_SE = 1.0
+
+
+def _unidentified(out, names) -> list[str]:
+    value = np.asarray(out.value, dtype=float)
+    se = np.sqrt(np.abs(np.diag(np.asarray(out.cov, dtype=float))))
+    core = [i for i, n in enumerate(names) if n in ("k", "c", "gamma") or n.startswith("k[")]
+    return [names[i] for i in core
+            if np.isfinite(se[i]) and se[i] > MAX_RELATIVE_SE * abs(value[i])]
 
 
 def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None,

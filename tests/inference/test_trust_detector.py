@@ -107,6 +107,17 @@ def test_moderate_quantisation_is_noted(x, step):
     assert "eps^2 absorbs" in note
 
 
+def _honest_se(res, name):
+    """The fit's SE, or, where a parameter sits at its bound (eps^2 = 0: 4 of these 8 traces,
+    exposure ~ 0 and 0.9 nm noise), the 95 % profile interval's half width / 1.96: the Wald
+    errors there are conditional on the bound and 3-4x smaller than the spread
+    (benchmarks/RESULTS_boundary.md), so they are not a yardstick for a shift."""
+    if not res.at_bounds:
+        return res.errors[res.param_names.index(name)]
+    lo, hi = res.intervals[name]
+    return (hi - lo) / (2 * 1.959964)
+
+
 def test_moderate_quantisation_does_not_bias_the_exact_fit():
     """The note's claim: with steps up to ~std the rounding is white noise that eps^2
     absorbs. Each trace's fit moves by its added noise (measured: |shift| <= 0.3 SE); over 8
@@ -119,8 +130,8 @@ def test_moderate_quantisation_does_not_bias_the_exact_fit():
         res = bt.calibrate(_rec(np.round(x / q) * q), method="likelihood", likelihood="exact")
         assert any("quantised" in n for n in res.notes)
         assert res.tracking_var > ref.tracking_var  # it took up (part of) q^2/12
-        dk.append((res.k - ref.k) / ref.k_err)
-        dg.append((res.gamma - ref.gamma) / ref.gamma_err)
+        dk.append((res.k - ref.k) / _honest_se(ref, "k"))
+        dg.append((res.gamma - ref.gamma) / _honest_se(ref, "gamma"))
     assert np.all(np.abs(dk) < 1.0) and np.all(np.abs(dg) < 1.0), (dk, dg)
     assert abs(np.mean(dk)) < 0.3 and abs(np.mean(dg)) < 0.3, (dk, dg)
 
