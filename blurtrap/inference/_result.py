@@ -44,6 +44,37 @@ def _json_float(v):
     return v if math.isfinite(v) else None
 
 
+#: SI unit and description of the core parameters (lab units: LAB)
+DESCRIBE = {
+    "k": ("N/m", "trap stiffness"),
+    "c": ("N/m/W", "stiffness per laser power (k = c P)"),
+    "gamma": ("N s/m", "friction coefficient"),
+    "tracking_var": ("m^2", "tracking-error variance eps^2"),
+    "diffusion": ("m^2/s", "diffusion coefficient D = kT/gamma"),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """One fitted parameter, by name (``result["k"]``): value and standard error in SI
+    (``unit``) and in lab units (``lab_value``, ``lab_error``, ``lab_unit``), its 95 % interval
+    (SI; NaN ends when unknown) and a description."""
+
+    name: str
+    value: float
+    error: float
+    unit: str
+    description: str
+    lab_value: float
+    lab_error: float
+    lab_unit: str
+    interval: tuple[float, float]
+
+    def __repr__(self) -> str:
+        return (f"{self.name} = {self.lab_value:.5g} +- {self.lab_error:.2g} {self.lab_unit}"
+                f" ({self.description})")
+
+
 class FitError(RuntimeError):
     """A fit did not converge or its Fisher matrix is singular; the message says which."""
 
@@ -172,6 +203,43 @@ class CalibrationResult:
             return self.covariance / np.outer(s, s)
 
     # ---- output -----------------------------------------------------------------------
+    def __getitem__(self, name: str) -> Parameter:
+        """A parameter by name, with unit and description: ``result["k"].value`` (SI),
+        ``.error``, ``.unit``, ``.lab_value``; ``"D"`` (or ``"diffusion"``) is derived."""
+        if name in ("D", "diffusion") and "gamma" in self.param_names:
+            value, error, key, interval = self.diffusion, self.diffusion_err, "diffusion", None
+        elif name in self.param_names:
+            value, error = self._get(name)
+            key, interval = name.split("[")[0], self.intervals.get(name)
+        else:
+            raise KeyError(f"no parameter {name!r} in this result; its parameters are "
+                           f"{list(self.param_names)}" + (" and 'D'" if "gamma" in
+                                                           self.param_names else ""))
+        unit, what = DESCRIBE.get(key, ("SI", key.replace("_", " ")))
+        fac, lab_unit = LAB.get(key, (1.0, unit))
+        return Parameter(name, value, error, unit, what, value * fac, error * fac, lab_unit,
+                         interval if interval is not None else (math.nan, math.nan))
+
+    def _repr_html_(self) -> str:
+        """The lab-unit table of :meth:`summary` for notebooks."""
+        import html
+
+        return f"<pre>{html.escape(self.summary())}</pre>"
+
+    def to_dataframe(self):
+        """The parameters as a pandas DataFrame (one row each: SI and lab-unit value, error,
+        unit, 95 % interval). Needs pandas (``pip install "blurtrap[pandas]"``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError('to_dataframe needs pandas: pip install "blurtrap[pandas]"'
+                              ) from None
+        names = list(self.param_names) + (["D"] if "gamma" in self.param_names else [])
+        rows = [dataclasses.asdict(self[n]) for n in names]
+        for r in rows:
+            r["ci_low"], r["ci_high"] = r.pop("interval")
+        return pd.DataFrame(rows).set_index("name")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict in SI units (keys per the public contract)."""
         many = len(self.k_per_recording) > 1 and not np.allclose(
