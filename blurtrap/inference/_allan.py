@@ -111,8 +111,8 @@ _COEF = np.array([1.0, -2.0, 1.0])
 
 def _pair_cov(mi, mj, ni, nj, c0, c1, r):
     """Cov(A(mi), A(mj)) of the overlapping estimator: 2 sum_L count(L) c(L)^2 /
-    (4 mi^2 mj^2 ni nj), with c(L) the covariance of second differences at lag L
-    (``physics._allan.second_difference_cov``). Beyond the windows' overlap c(L) decays as
+    (4 mi^2 mj^2 ni nj), with c(L) = -1/2 sum_pq a_p b_q V(|L + t_q - s_p|) the covariance of
+    second differences at lag L (``physics._allan`` docstring). Beyond the windows' overlap c(L) decays as
     rho^|gap|, so lags more than 20/r past it (relative weight < e^-40) are left out."""
     tail = int(min(ni + nj, math.ceil(20.0 / r) + 1))
     lags = np.arange(max(-ni + 1, -2 * mj - tail), min(nj, 2 * mi + tail), dtype=float)

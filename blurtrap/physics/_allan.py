@@ -18,14 +18,15 @@ evaluated with ``expm1`` (u and P never lose precision). No truncation, any ``W 
 Covariance of the estimator: the second differences ``d_k = Y_{k+2m} - 2 Y_{k+m} + Y_k`` are
 linear in the ``Y``; for coefficient vectors a, b with zero sum,
 ``Cov(sum a_p Y_{s_p}, sum b_q Y_{t_q}) = -1/2 sum_{p,q} a_p b_q V(|s_p - t_q|)``, and for
-Gaussian frames ``Cov(d^2, e^2) = 2 Cov(d, e)^2``; see :func:`allan_covariance`.
+Gaussian frames ``Cov(d^2, e^2) = 2 Cov(d, e)^2``; see
+``blurtrap.inference._allan.allan_covariance``.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._blur import _blur_factor, _rho_b
+from ._spectra import _autocovariance
 
 
 def _geo(n, r):
@@ -37,9 +38,8 @@ def _geo(n, r):
 
 def frame_moments(sigma2, tau, exposure, frame_interval, tracking_var):
     """``(C(0), c_1, r)`` of the frames: ``C(l) = c_1 exp(-r (l - 1))`` for l >= 1."""
-    a = exposure / tau
-    r = frame_interval / tau
-    return sigma2 * _blur_factor(a) + tracking_var, sigma2 * _rho_b(a, r), r
+    args = (sigma2, tau, exposure, frame_interval, tracking_var)
+    return _autocovariance(0, *args), _autocovariance(1, *args), frame_interval / tau
 
 
 def block_sum_variance(n, c0, c1, r):
@@ -64,14 +64,3 @@ def allan_variance_model(m, sigma2, tau, exposure, frame_interval, tracking_var=
     `tau` [s], exposure W <= dt [s], frame interval dt [s], tracking-error variance [m^2]."""
     c0, c1, r = frame_moments(sigma2, tau, exposure, frame_interval, tracking_var)
     return allan_from_moments(m, c0, c1, r)
-
-
-def second_difference_cov(lag, m1, m2, c0, c1, r):
-    """``Cov(d^{(m1)}_k, d^{(m2)}_{k+lag})`` of second differences of block sums
-    (``d^{(m)}_k = Y_{k+2m} - 2 Y_{k+m} + Y_k``), broadcast over `lag` [frames]."""
-    lag = jnp.asarray(lag, dtype=jnp.result_type(c0, float))
-    s = jnp.stack([0.0 * m1, 1.0 * m1, 2.0 * m1])
-    t = jnp.stack([0.0 * m2, 1.0 * m2, 2.0 * m2])
-    coef = jnp.array([1.0, -2.0, 1.0])
-    sep = jnp.abs(lag[..., None, None] + t - s[:, None])
-    return -0.5 * jnp.einsum("p,q,...pq->...", coef, coef, block_sum_variance(sep, c0, c1, r))

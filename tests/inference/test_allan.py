@@ -18,7 +18,6 @@ from blurtrap.physics._allan import (
     allan_variance_model,
     block_sum_variance,
     frame_moments,
-    second_difference_cov,
 )
 
 KB = 1.380649e-23
@@ -105,13 +104,6 @@ def test_covariance_equals_dense_quadratic_form_formula():
     np.testing.assert_allclose([np.trace(q @ s) for q in qs],
                                np.asarray(allan_variance_model(m, sigma2, tau, w, dt, eps2)),
                                rtol=1e-10)
-
-
-def test_second_difference_cov_broadcasts_over_lags():
-    lags = np.arange(-5, 6)
-    one = [float(second_difference_cov(float(lag), 2.0, 3.0, 1.0, 0.6, 0.4)) for lag in lags]
-    np.testing.assert_allclose(np.asarray(second_difference_cov(lags, 2.0, 3.0, 1.0, 0.6, 0.4)),
-                               one, rtol=1e-12)
 
 
 def test_estimator_mean_and_scatter_against_exact_law():
