@@ -142,10 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
     c.add_argument("--method", choices=_METHODS, default="auto",
                    help="estimator (default auto: the most informative the data allow)")
-    c.add_argument("--model", type=_model_arg, default="standard",
-                   help="trap model: standard (default: blur + aliasing + tracking noise), "
-                   "blur, naive, naive_aliased, optionally with effects added by '+', e.g. "
-                   "standard+drift or standard+drift+line_noise")
+    c.add_argument("--model", type=_model_arg, default=None,
+                   help="trap model: standard (default: blur + aliasing + tracking noise, or "
+                   "what the manifest's detector implies), blur, naive, naive_aliased, "
+                   "optionally with effects added by '+', e.g. standard+drift or "
+                   "standard+drift+line_noise")
     c.add_argument("--k-mode", choices=_K_MODES, default=None,
                    help="how k is shared across recordings (default: per power when powers "
                    "differ, k = cP for variance_vs_power)")
@@ -155,6 +156,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="blocks for --method psd (default 128, >= 64 frames each)")
     c.add_argument("--f-range", type=float, nargs=2, default=None, metavar=("FMIN", "FMAX"),
                    help="frequency range fitted by the spectral methods [Hz]")
+    c.add_argument("--friction", choices=("free", "stokes"), default=None,
+                   help="friction: fitted (free) or Stokes from the manifest's bead_radius_m "
+                   "(default: the manifest's 'friction', else free)")
+    c.add_argument("--exclude", type=float, nargs=2, action="append", default=None,
+                   metavar=("F_LOW", "F_HIGH"),
+                   help="exclude this band [Hz] from the spectral fit (repeatable)")
+    c.add_argument("--lines", choices=("auto", "keep"), default="auto",
+                   help="auto (default): find strong narrow lines (drives, mains) and "
+                   "subtract them before fitting; keep: fit the trace as it is")
     c.add_argument("--diffusion", type=float, default=None, metavar="UM2_PER_S",
                    help="known D [um^2/s]: blur-corrected --method equipartition, and the "
                         "fallback of --method auto when frames carry no temporal information")
@@ -300,6 +310,11 @@ def _calibrate(args) -> int:
         kw["n_blocks"] = args.n_blocks
     if args.f_range is not None:
         kw["f_range"] = tuple(args.f_range)
+    if args.friction is not None:
+        kw["friction"] = args.friction
+    if args.exclude:
+        kw["excluded_ranges"] = [tuple(r) for r in args.exclude]
+    kw["lines"] = args.lines
     if args.diffusion is not None:  # calibrate checks that the method uses it
         if not (0 < args.diffusion <= 1e4):
             raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "

@@ -17,6 +17,11 @@ from .._config import float64_scope, warn_if_float32
 from ..physics._constants import BOLTZMANN
 from ._allan import fit_allan
 from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton, fit_nll_only
+from ._fixed import expand as expand_fixed
+from ._fixed import propagate as propagate_fixed
+from ._fixed import reduce as reduce_fixed
+from ._fixed import reduced_objective
+from ._instrument import finish_instrument, prepare_instrument
 from ._models import TrapModel, get_model
 from ._problems import (
     SpectralArgs,
@@ -289,7 +294,7 @@ def spectral_gof(ratio, weight, n_params, min_dof=64):
 # ------------------------------------------------------------------------------------------
 # spectral (Whittle / blocked) and exact likelihood fits
 # ------------------------------------------------------------------------------------------
-def _spectral_args(recs, layout, model, n_blocks, f_range):
+def _spectral_args(recs, layout, model, n_blocks, f_range, excluded=None):
     """Periodogram ordinates of all recordings. Whenever the model has the closed form, its
     expectation is the exact expected periodogram of a block of M frames (the Fejer-kernel
     leakage of the finite block included, same cost as P_d): for blocked spectra and for the
@@ -309,6 +314,8 @@ def _spectral_args(recs, layout, model, n_blocks, f_range):
         if f_range is not None:
             sel = (f >= f_range[0]) & (f <= f_range[1])
             f, p, wt = f[sel], p[sel], wt[sel]
+        for a, b in excluded or ():
+            wt = np.where((f >= a) & (f <= b), 0.0, wt)  # excluded ordinates: no weight
         fs.append(f)
         ps.append(p)
         ws.append(wt)
@@ -579,10 +586,10 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
 
 
 def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None,
-                  strict=True):
-    args = _spectral_args(recs, layout, model, n_blocks, f_range)
+                  strict=True, fixed=None, excluded=None):
+    args = _spectral_args(recs, layout, model, n_blocks, f_range, excluded)
     scale = _start_vector(recs, layout, model.noise, start)
-    out = fit_ml(spectral_nll, scale, args)
+    out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
     _check_fit(out, layout.names, method_name, strict, notes, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
@@ -591,8 +598,7 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
               "weight": np.asarray(args.weight)}
     res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound,
-                    interval_source=ProfileIntervals(spectral_nll, args, scale, out.value,
-                                                     out.cov, out.at_bound))
+                    interval_source=_interval_source(spectral_nll, args, scale, out, held))
     block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
     return _check_relaxation_resolved(res, recs, method_name, block)
 
@@ -612,18 +618,48 @@ def screen_model(recs, model, k, start=None):
     return dict(zip(layout.names, map(float, p))), nll, gof, ok
 
 
+def _fit_held(fit, nll, scale, args, names, fixed):
+    """``fit(nll, scale, args)`` with the parameters in ``fixed`` ({name: (value, se)}) held:
+    ``(FitOutput on all parameters, held)``, the input errors propagated into the covariance
+    (:mod:`._fixed`); ``held`` is None without fixed parameters, else what the intervals need
+    (reduced objective, its start scale, args and output)."""
+    if not fixed:
+        return fit(nll, scale, args), None
+    free, fscale, fargs = reduce_fixed(names, scale, args, fixed)
+    red = reduced_objective(nll)
+    out = fit(red, fscale, fargs)
+    full = expand_fixed(out, free, len(names), fargs.full)
+    cov = propagate_fixed(nll, args, full.value, full.cov, names, fixed)
+    full = eqx.tree_at(lambda o: o.cov, full, jnp.asarray(cov))
+    return full, (red, fscale, fargs, out, free, any(se > 0 for _, se in fixed.values()))
+
+
+def _interval_source(nll, args, scale, out, held, hessian="auto"):
+    """Profile intervals of the fit (of its free parameters when some are held; none when
+    a held input has an error: its Wald errors include the propagated input error, which a
+    profile with the input held would leave out)."""
+    if held is None:
+        return ProfileIntervals(nll, args, scale, out.value, out.cov, out.at_bound, hessian)
+    red, fscale, fargs, rout, free, has_error = held
+    if has_error:
+        return None
+    src = ProfileIntervals(red, fargs, fscale, rout.value, rout.cov, rout.at_bound, hessian)
+    return lambda result: float64_scope(src._compute)(
+        tuple(result.param_names[i] for i in free))
+
+
 def _k_mode_of(layout):
     if layout.linear_power:
         return "linear_power"
     return "shared" if layout.n_k == 1 else "per_group"
 
 
-def _fit_exact(recs, layout, model, notes):
+def _fit_exact(recs, layout, model, notes, fixed=None):
     args = make_exact_args(recs, layout, model)
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     moment = _start_vector(recs, layout, model.noise)
-    wout = fit_ml(spectral_nll, moment, sargs)
+    wout, _ = _fit_held(fit_ml, spectral_nll, moment, sargs, layout.names, fixed)
     starts = [wout.value] if bool(wout.success) else []
     names = layout.names
     if not starts or ("k" in names and _leakage_index(
@@ -632,12 +668,12 @@ def _fit_exact(recs, layout, model, notes):
         # where Whittle is unreliable (tau not << T) also start from the closed forms and
         # keep the better optimum: the exact likelihood can have a second local optimum there
         starts.append(moment)
-    out = s_out = None
+    out = s_out = held = None
     for s0 in starts:
-        cand = fit_ml_fd_newton(exact_nll, s0, args)
+        cand, h0 = _fit_held(fit_ml_fd_newton, exact_nll, s0, args, names, fixed)
         if out is None or (bool(cand.converged) and (not bool(out.converged)
                                                       or float(cand.nll) < float(out.nll))):
-            out, s_out = cand, s0
+            out, s_out, held = cand, s0, h0
     assert out is not None  # starts is never empty
     _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
     # goodness of fit on the periodogram against this fit's own spectrum
@@ -646,8 +682,8 @@ def _fit_exact(recs, layout, model, notes):
     extras = {"loglik": -float(out.nll)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound,
-                    interval_source=ProfileIntervals(exact_nll, args, s_out, out.value, out.cov,
-                                                     out.at_bound, hessian="fd"))
+                    interval_source=_interval_source(exact_nll, args, s_out, out, held,
+                                                     hessian="fd"))
     return _check_relaxation_resolved(res, recs, "likelihood (exact)")
 
 
@@ -1063,6 +1099,12 @@ def calibrate(
     pade: bool = False,
     start: dict | None = None,
     strict: bool = True,
+    fixed: dict | None = None,
+    friction: str | None = None,
+    detector: str | None = None,
+    anti_aliasing: bool | None = None,
+    excluded_ranges=None,
+    lines: str = "auto",
 ) -> CalibrationResult:
     """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
 
@@ -1107,11 +1149,18 @@ def calibrate(
                                        diffusion, pade, start, strict)
     radii = _bead_radii(recs)
     data_notes = tuple(_inspect_frames(recs, bool(strict)))
-    res = _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade,
-                     start, strict)
-    data_notes += tuple(_stokes_notes(recs, radii, res))
-    if data_notes:
-        res = dataclasses.replace(res, notes=tuple(res.notes) + data_notes)
+    plan = prepare_instrument(recs, mdl, model is not None, method, fixed=fixed,
+                              friction=friction, detector=detector,
+                              anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
+                              lines=lines, f_range=f_range)
+    res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
+                     plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded)
+    res = finish_instrument(res, plan)
+    if not plan.volts:
+        data_notes += tuple(_stokes_notes(recs, radii, res))
+    notes = tuple(plan.notes) + data_notes
+    if notes:
+        res = dataclasses.replace(res, notes=tuple(res.notes) + notes)
     return res
 
 
@@ -1176,8 +1225,15 @@ def _stokes_notes(recs, radii, res) -> list:
 
 
 def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,
-               strict):
+               strict, fixed=None, excluded=None):
     notes: list[str] = []
+    fixed = fixed or {}
+    if fixed and method not in ("auto", "likelihood", "psd"):
+        raise ValueError(f"fixed = {sorted(fixed)} applies to the likelihood and psd methods; "
+                         f"got method = {method!r}")
+    if excluded and method not in ("auto", "likelihood", "psd"):
+        raise ValueError(f"excluded ranges apply to the spectral methods (Whittle likelihood, "
+                         f"psd); got method = {method!r}")
 
     if method == "equipartition":
         return _equipartition(recs, diffusion, pade)
@@ -1193,6 +1249,12 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
             best = max(z for _, z in info)
             notes.append("auto: frames resolve the trap relaxation (lag-1 correlation "
                          f"{best:.1f} standard errors above 0); joint likelihood")
+        elif "gamma" in fixed:
+            best = max(z for _, z in info)
+            notes.append(f"auto: frames carry little temporal information (lag-1 correlation "
+                         f"{best:.1f} standard errors above 0: dt >> tau); gamma is held at the "
+                         "given friction, so the joint likelihood gives k from the "
+                         "blur-corrected variance")
         elif n_exp >= 3:
             notes.append(f"auto: frames are nearly independent (dt >> tau); gamma is "
                          f"identified by the {n_exp} exposures (variance-vs-exposure "
@@ -1219,6 +1281,12 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
     if mdl.has("power_offset") and k != "linear_power":
         raise ValueError("the power_offset effect needs k='linear_power' (k = c (P - P0))")
     layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
+    unknown = sorted(set(fixed) - set(layout.names))
+    if unknown:
+        raise ValueError(f"fixed names {unknown}, which this model does not have; its "
+                         f"parameters are {list(layout.names)}")
+    if len(fixed) == len(layout.names):
+        raise ValueError(f"fixed holds every parameter {list(layout.names)}: nothing to fit")
     if start:
         unknown = sorted(set(start) - set(layout.names))
         if unknown:
@@ -1232,17 +1300,25 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
         use = likelihood
         if use == "auto":
             use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
-            if f_range is not None and use == "exact":
+            if (f_range is not None or excluded) and use == "exact":
                 use = "whittle"
-                notes.append("f_range given: the Whittle likelihood over that band (the exact "
+                notes.append(("f_range" if f_range is not None else "excluded ranges")
+                             + " given: the Whittle likelihood over that band (the exact "
                              "likelihood uses every frequency)")
+        if use == "exact" and not mdl.alias:
+            if likelihood == "exact":
+                raise ValueError(f"model {mdl.name!r} is not aliased (an anti-aliased "
+                                 "photodiode): its frames are not the sampled trap process of "
+                                 "the exact likelihood; use likelihood='whittle'")
+            use = "whittle"
         if use == "exact" and mdl.extra:
             if likelihood == "exact":
                 raise ValueError("the exact time-domain likelihood covers the closed-form "
                                  "model only; use likelihood='whittle' with effects "
                                  f"{[e.name for e in mdl.extra]}")
             use = "whittle"
-        exact_ok = not mdl.extra and f_range is None and mdl.alias and mdl.closed_form
+        exact_ok = (not mdl.extra and f_range is None and not excluded and mdl.alias
+                    and mdl.closed_form)
         if use == "whittle" and likelihood == "auto" and exact_ok:
             ks, gs = zip(*[moment_start(r)[:2] for r in recs])
             if _leakage_index(recs, ks, float(np.median(gs))) > _LEAKAGE_INDEX_MAX:
@@ -1252,9 +1328,9 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
         if use == "exact":
             if not notes or not notes[-1].startswith("likelihood: exact"):
                 notes.append("likelihood: exact")
-            return _fit_exact(recs, layout, mdl, notes)
+            return _fit_exact(recs, layout, mdl, notes, fixed)
         res = _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", list(notes), start,
-                            strict)
+                            strict, fixed, excluded)
         p = res.params
         if "gamma" in p and "c" not in p:
             kvals = res.k_per_recording
@@ -1264,7 +1340,7 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
                     notes.append("likelihood: exact (the fitted relaxation time is not short "
                                  "compared with the record, where the Whittle approximation "
                                  "is biased)")
-                    return _fit_exact(recs, layout, mdl, notes)
+                    return _fit_exact(recs, layout, mdl, notes, fixed)
                 res = dataclasses.replace(res, notes=res.notes + (
                     f"Whittle leakage index sqrt(N) tau/T = {leak:.2g} > {_LEAKAGE_INDEX_MAX}: "
                     "the relaxation time is not short compared with the record and the "
@@ -1287,7 +1363,8 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
             nb = 1 << (nb.bit_length() - 1)
             notes.append(f"psd: {nb} blocks of {n_min // nb} frames (>= 100 tau each where "
                          "the record allows)")
-        res = _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict)
+        res = _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict,
+                            fixed, excluded)
         return _check_psd_blocks(res, recs, int(nb), explicit=n_blocks is not None)
     if method == "allan":
         return _fit_allan(recs, layout, mdl, notes)

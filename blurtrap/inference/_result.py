@@ -35,6 +35,8 @@ LAB = {
     "frame_interval": (1e3, "ms"),
     "position": (1e9, "nm"),
     "laser_power": (1e3, "mW"),
+    "displacement_sensitivity": (1e9, "nm/V"),
+    "force_sensitivity": (1e12, "pN/V"),
 }
 
 
@@ -51,6 +53,9 @@ DESCRIBE = {
     "gamma": ("N s/m", "friction coefficient"),
     "tracking_var": ("m^2", "tracking-error variance eps^2"),
     "diffusion": ("m^2/s", "diffusion coefficient D = kT/gamma"),
+    "corner_frequency": ("Hz", "corner frequency f_c = k/(2 pi gamma)"),
+    "displacement_sensitivity": ("m/V", "displacement sensitivity Rd (metres per volt)"),
+    "force_sensitivity": ("N/V", "force sensitivity Rf = k Rd (newtons per volt)"),
 }
 
 
@@ -164,6 +169,28 @@ class CalibrationResult:
     def tracking_var_err(self) -> float:
         return self._get("tracking_var")[1] if "tracking_var" in self.param_names else 0.0
 
+    @property
+    def corner_frequency(self) -> float:
+        """f_c = k / (2 pi gamma) [Hz] (the first recording's k when k varies)."""
+        return self.k / (2.0 * math.pi * self.gamma)
+
+    @property
+    def corner_frequency_err(self) -> float:
+        """Standard error of :attr:`corner_frequency` (delta method with the k-gamma
+        covariance; NaN when either error is unknown)."""
+        fc = self.corner_frequency
+        names = self.param_names
+        kname = next((n for n in names if n == "k" or n.startswith("k[")), None)
+        if kname is None or "gamma" not in names or not math.isfinite(fc):
+            return math.nan
+        i, j = names.index(kname), names.index("gamma")
+        c = self.covariance
+        k, g = float(self.values[i]), self.gamma
+        var = fc**2 * (c[i, i] / k**2 + c[j, j] / g**2 - 2.0 * c[i, j] / (k * g))
+        if kname != "k" and not np.isclose(k, self.k):  # first recording's k is another one
+            var = fc**2 * ((self.k_err / self.k) ** 2 + c[j, j] / g**2)
+        return float(math.sqrt(var)) if var >= 0 else math.nan
+
     def _wald_intervals(self):
         half = Z95 * self.errors
         ivs = {n: (float(v - h), float(v + h))
@@ -274,6 +301,12 @@ class CalibrationResult:
         }
         if "c" in self.param_names:
             out["c"], out["c_err"] = self._get("c")
+        if "gamma" in self.param_names:
+            out["corner_frequency"] = _json_float(self.corner_frequency)
+            out["corner_frequency_err"] = _json_float(self.corner_frequency_err)
+        for name in ("displacement_sensitivity", "force_sensitivity"):
+            if name in self.param_names:
+                out[name], out[f"{name}_err"] = (_json_float(v) for v in self._get(name))
         return out
 
     def summary(self) -> str:
@@ -298,7 +331,8 @@ class CalibrationResult:
                 tau = g / k
                 rows.append(("tau = gamma/k" + (" (first)" if len(set(map(float,
                               self.k_per_recording))) > 1 else ""), tau * 1e3, math.nan, "ms"))
-                rows.append(("f_c = k/(2 pi gamma)", k / (2 * math.pi * g), math.nan, "Hz"))
+                rows.append(("f_c = k/(2 pi gamma)", self.corner_frequency,
+                             self.corner_frequency_err, "Hz"))
         if "tracking_var" in self.param_names:
             tv = max(self.tracking_var, 0.0)
             rows.append(("eps (tracking rms)", math.sqrt(tv) * 1e9, math.nan, "nm"))

@@ -1,0 +1,392 @@
+r"""The instrument around a calibration: detector model, known friction, positions in volts,
+an active-calibration stage drive, lines in the spectrum, fitted and excluded bands.
+
+:func:`prepare_instrument` reads the instrument settings of the recordings (the manifest keys
+of DESIGN section 5, ``blurtrap.data.instrument_settings``; the calibrate arguments win)
+and returns a :class:`Plan`: the model, the held parameters, the cleaned recordings and the
+band to fit. :func:`finish_instrument` turns the fit into the reported result: for positions
+in volts the displacement sensitivity ``Rd`` [m/V] and the force sensitivity ``Rf = k Rd``
+[N/V], with the friction known (``friction="stokes"``: ``gamma = 6 pi eta R``, Faxen's factor
+near a surface) or measured by the drive; every input error propagated to first order.
+
+**Volts.** A trace in volts ``x_V = x / Rd`` is the trap process scaled: fitted as if it were
+in metres it gives ``k_V = k Rd^2``, ``gamma_V = gamma Rd^2`` (``tau`` and ``f_c`` are scale
+free), ``eps_V^2 = eps^2 / Rd^2``. A known ``gamma`` gives ``Rd = sqrt(gamma_V / gamma)``.
+
+**Active calibration** (Tolic-Norrelykke et al. 2006). A stage (fluid) drive
+``x_s = A sin(2 pi f_d t)`` moves the bead relative to the trap by ``H(f_d) x_s``,
+``H(f) = i f / (f_c + i f)``; the detector averages over the exposure (``sinc(f_d W)``) and
+a photodiode filter multiplies by ``|T(f_d)|``. The measured ratio of the response to the
+recorded stage amplitude is ``|r| = sinc(f_d W) |H(f_d)| |T(f_d)| / Rd``, so ``Rd`` follows
+from ``r`` and the passive fit's ``f_c`` alone (no Stokes), and then ``gamma = gamma_V / Rd^2``
+and ``k = k_V / Rd^2``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ._models import TrapModel
+
+#: the photodiode-with-anti-aliasing fit band ends here (fraction of fs) unless given: a
+#: decimating instrument's anti-alias filter starts to cut in above ~0.4-0.45 fs
+AA_BAND = 0.4
+
+
+@dataclasses.dataclass
+class Plan:
+    recordings: list
+    model: TrapModel
+    fixed: dict  # {name: (value, se)} held in the fit
+    f_range: tuple | None
+    excluded: list  # [(a, b)] Hz
+    notes: list
+    volts: bool = False
+    #: known friction (value, se) [N s/m] for the volts transform (volts + stokes)
+    gamma_known: tuple | None = None
+    #: active calibration: (|r|, se, f_d, exposure) of the drive response
+    drive: tuple | None = None
+    unit: str = "m"
+
+
+def _settings(rec) -> dict:
+    try:  # TEMP until the data layer lands
+        from ..data import instrument_settings
+    except ImportError:
+        keys = ("detector", "anti_aliasing", "diode_filter", "bead_radius_m", "viscosity_Pa_s",
+                "distance_to_surface_m", "friction", "drive", "fit_range_Hz",
+                "excluded_ranges_Hz")
+        m = dict(rec.metadata)
+        out = {key: m.get(key) for key in keys}
+        out["anti_aliasing"] = bool(out["anti_aliasing"])
+        out["friction"] = out["friction"] or "free"
+        return out
+    return instrument_settings(rec)
+
+
+def _same(values, what):
+    vals = [v for v in values]
+    first = vals[0]
+    for i, v in enumerate(vals[1:], 1):
+        if v != first:
+            raise ValueError(f"recordings disagree on {what}: recording 0 has {first!r}, "
+                             f"recording {i} has {v!r}; calibrate them separately")
+    return first
+
+
+def _detector_model(st, detector, anti_aliasing, notes) -> TrapModel:
+    """The default model from the detector settings (standard for a camera or an
+    integrating photodiode; unblurred, unfolded for an anti-aliased photodiode)."""
+    det = detector if detector is not None else st["detector"]
+    aa = anti_aliasing if anti_aliasing is not None else st["anti_aliasing"]
+    if det not in (None, "camera", "photodiode"):
+        raise ValueError(f"detector must be 'camera' or 'photodiode' (or None); got "
+                         f"detector = {det!r}")
+    if aa and det != "photodiode":
+        raise ValueError(f"anti_aliasing applies to detector='photodiode'; got detector = "
+                         f"{det!r}")
+    if aa:
+        notes.append("detector: photodiode with anti-aliasing (oversampled and filtered by "
+                     "the instrument): no exposure average and no folding in the model")
+        return TrapModel(blur=False, alias=False, noise=True, name="photodiode_aa")
+    if det == "camera":
+        notes.append("detector: camera (exposure average over W, folding at fs)")
+    elif det == "photodiode":
+        notes.append("detector: photodiode sampled by an integrating ADC (average over the "
+                     "exposure W, folding at fs); set anti_aliasing if the instrument "
+                     "oversamples and filters")
+    return TrapModel(blur=True, alias=True, noise=True, name="standard")
+
+
+def _stokes_gamma(recs, sts):
+    """(gamma, se) of the known bead for every recording (Stokes x Faxen); one value."""
+    from ..physics import faxen_factor, water_viscosity
+
+    out = []
+    for i, (r, st) in enumerate(zip(recs, sts)):
+        rad = st["bead_radius_m"]
+        if rad is None:
+            raise ValueError(f"friction='stokes' needs the bead radius: recording {i} has no "
+                             "bead_radius_m (manifest key or metadata)")
+        temp = float(r.temperature)
+
+        def gamma_of(radius, eta_given, temperature, st=st):
+            eta = eta_given if eta_given is not None else float(water_viscosity(temperature))
+            h = st["distance_to_surface_m"]
+            fax = 1.0 if h is None else float(faxen_factor(radius, h))
+            return 6.0 * math.pi * eta * radius * fax
+
+        eta0 = st["viscosity_Pa_s"]
+        g = gamma_of(rad, eta0, temp)
+        var = 0.0
+        for err, which in ((st.get("bead_radius_err_m"), 0), (st.get("viscosity_err_Pa_s"), 1),
+                           (st.get("temperature_err_K"), 2)):
+            if not err or (which == 1 and eta0 is None) or (which == 2 and eta0 is not None):
+                continue
+            args = [rad, eta0, temp]
+            args[which] = args[which] + err
+            up = gamma_of(*args)
+            args[which] = args[which] - 2 * err
+            dn = gamma_of(*args)
+            var += (0.5 * (up - dn)) ** 2
+        out.append((g, math.sqrt(var)))
+    g0 = out[0][0]
+    if any(abs(g - g0) > 1e-9 * g0 for g, _ in out):
+        raise ValueError("friction='stokes': the recordings' beads give different friction "
+                         f"({[g for g, _ in out]} N s/m); the fit shares one gamma, so "
+                         "calibrate them separately")
+    return out[0]
+
+
+def _ranges(value, what):
+    out = []
+    for pair in value or ():
+        try:
+            a, b = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be a list of [f_low, f_high] pairs in Hz; got "
+                             f"{value!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+            raise ValueError(f"{what}: each range needs 0 <= f_low < f_high (Hz); got "
+                             f"[{a!r}, {b!r}]")
+        out.append((a, b))
+    return out
+
+
+def _clean_lines(recs, sts, lines, notes, excluded):
+    """Find strong lines (and the drive) in every recording and subtract them; returns the
+    cleaned recordings and the drive response ``(|r|, se, f_d, exposure)`` or None."""
+    out, drive = [], None
+    if lines == "keep" and not any((s["drive"] or {}) for s in sts):
+        return list(recs), None
+    try:  # TEMP until the line finder lands
+        from ._active import drive_response
+        from ._lines import find_lines, remove_lines
+    except ImportError:
+        return list(recs), None
+
+    for i, (r, st) in enumerate(zip(recs, sts)):
+        x = np.asarray(r.positions, dtype=float)
+        dt = float(r.frame_interval)
+        f_d = (st["drive"] or {}).get("frequency_Hz")
+        stage = getattr(r, "stage", None)
+        if f_d is not None:
+            if stage is None:
+                raise ValueError(f"recording {i}: a drive at {f_d:g} Hz needs the stage "
+                                 "positions (Recording(stage=...) or a stage_nm column)")
+            if drive is not None:
+                raise ValueError("active calibration from more than one driven recording is "
+                                 "not supported yet: calibrate each driven recording alone")
+            resp = drive_response(x, np.asarray(stage, dtype=float), dt, float(r.exposure),
+                                  frequency=f_d)
+            drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure))
+            notes.append(f"drive: response at {resp.frequency:.6g} Hz to the stage amplitude "
+                         f"{resp.stage_amplitude * 1e9:.4g} nm: |x/x_stage| = "
+                         f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} per m (active "
+                         "calibration; the line is removed before the passive fit)")
+        if lines == "keep":
+            out.append(r)
+            continue
+        known = () if f_d is None else (resp.frequency,)
+        found = find_lines(x, dt, known=known)
+        if not found:
+            out.append(r)
+            continue
+        desc = ", ".join(f"{ln.frequency:.6g} Hz ({ln.power_ratio:.3g} x the local spectrum)"
+                         for ln in found)
+        notes.append(f"lines: recording {i} has {len(found)} strong narrow line(s) at {desc}; "
+                     "subtracted (least-squares sinusoids, 2 degrees of freedom each) before "
+                     "the fit so that they do not bias it (lines='keep' to keep them)")
+        out.append(r.replace(positions=remove_lines(x, dt, found)))
+    return out, drive
+
+
+def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction=None,
+                       detector=None, anti_aliasing=None, excluded_ranges=None, lines="auto",
+                       f_range=None) -> Plan:
+    """The plan of a calibration from the recordings' instrument settings and calibrate's
+    arguments (which win over the settings)."""
+    from ._fixed import parse_fixed
+
+    if lines not in ("auto", "keep"):
+        raise ValueError(f"lines must be 'auto' (find and subtract strong lines) or 'keep'; "
+                         f"got lines = {lines!r}")
+    if friction not in (None, "free", "stokes"):
+        raise ValueError(f"friction must be 'free' or 'stokes' (or None: the recordings' "
+                         f"setting); got friction = {friction!r}")
+    sts = [_settings(r) for r in recs]
+    notes: list[str] = []
+    st = {key: _same([s[key] for s in sts], key)
+          for key in ("detector", "anti_aliasing", "diode_filter", "friction")}
+    units = {str(getattr(r, "position_unit", "m")) for r in recs}
+    if len(units) > 1:
+        raise ValueError(f"recordings mix position units {sorted(units)}; calibrate them "
+                         "separately")
+    unit = units.pop()
+    volts = unit == "V"
+    mdl = model if model_given else _detector_model(st, detector, anti_aliasing, notes)
+    held = parse_fixed(fixed, None)
+    dfilt = st["diode_filter"]
+    if dfilt == "fit" and not mdl.has("detector_filter"):
+        mdl = mdl.add("detector_filter")
+    elif isinstance(dfilt, dict):
+        if not mdl.has("detector_filter"):
+            mdl = mdl.add("detector_filter")
+        held.setdefault("f3db", (float(dfilt["f3db_Hz"]), 0.0))
+        held.setdefault("diode_alpha", (float(dfilt["alpha"]), 0.0))
+        notes.append(f"diode filter held at f3db = {dfilt['f3db_Hz']:g} Hz, alpha = "
+                     f"{dfilt['alpha']:g} (from a previous characterisation)")
+    fr = friction if friction is not None else st["friction"]
+    gamma_known = None
+    if fr == "stokes":
+        if "gamma" in held:
+            raise ValueError("friction='stokes' and fixed['gamma'] both set gamma; give one")
+        g, se = _stokes_gamma(recs, sts)
+        if volts:
+            gamma_known = (g, se)
+        else:
+            held["gamma"] = (g, se)
+        h = sts[0]["distance_to_surface_m"]
+        notes.append(f"friction: Stokes 6 pi eta R = {g * 1e6:.5g} pN s/um from the bead "
+                     f"(R = {sts[0]['bead_radius_m'] * 1e6:.4g} um"
+                     + (f", Faxen factor at {h * 1e6:.4g} um from the surface" if h else "")
+                     + (f"; +- {se / g * 100:.2g} % propagated" if se > 0 else "")
+                     + ("" if volts else "), held in the fit"))
+    if volts and "gamma" in held:
+        gamma_known = held.pop("gamma")
+    rng = f_range
+    if rng is None and sts[0]["fit_range_Hz"] is not None:
+        rng = tuple(_same([tuple(s["fit_range_Hz"] or ()) for s in sts], "fit_range_Hz"))
+    if rng is None and not mdl.alias and method in ("auto", "likelihood", "psd"):
+        rng = (0.0, AA_BAND * min(1.0 / float(r.frame_interval) for r in recs))
+        notes.append(f"fit band 0-{rng[1]:.6g} Hz ({AA_BAND:g} fs: below the instrument's "
+                     "anti-alias filter; fit_range_Hz to change it)")
+    excluded = _ranges(excluded_ranges, "excluded_ranges")
+    for s in sts:
+        excluded += [r for r in _ranges(s["excluded_ranges_Hz"], "excluded_ranges_Hz")
+                     if r not in excluded]
+    cleaned, drive = _clean_lines(recs, sts, lines, notes, excluded)
+    if volts and gamma_known is None and drive is None:
+        raise ValueError("positions are in volts: the displacement sensitivity Rd (m/V) needs "
+                         "the friction (friction='stokes' with the bead radius, or "
+                         "fixed={'gamma': ...}) or an active calibration (a stage drive)")
+    return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
+                notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit)
+
+
+#: parameters that scale with the position unit: name -> power of Rd (x_m = Rd x_V)
+_SCALING = {"k": -2, "c": -2, "gamma": -2, "tracking_var": 2, "drift_diffusion": 2,
+            "line_amplitude": 1}
+
+
+def _power_of(name):
+    base = name.split("[")[0]
+    return _SCALING.get(base, 0)
+
+
+def _rd_from_drive(values, names, drive, model):
+    """Rd from the drive response (module docstring); ``values`` in volts units."""
+    mag, _, f_d, w = drive
+    ks = [v for n, v in zip(names, values) if n == "k" or n.startswith("k[")]
+    fc = ks[0] / (2.0 * math.pi * values[names.index("gamma")])
+    h = f_d / math.hypot(fc, f_d)
+    blur = abs(float(np.sinc(f_d * w))) if model.blur else 1.0
+    t = 1.0
+    if "f3db" in names:
+        from ..physics._effects import photodiode_transfer
+
+        t = math.sqrt(float(photodiode_transfer(f_d, values[names.index("f3db")],
+                                                values[names.index("diode_alpha")])))
+    return blur * h * t / mag
+
+
+def _outputs(theta, names, plan, n_fit):
+    """The reported vector from the fit vector (volts units) and the inputs after it."""
+    values = theta[:n_fit]
+    if plan.drive is not None:
+        rd = _rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model)
+    else:
+        assert plan.gamma_known is not None
+        rd = math.sqrt(values[names.index("gamma")] / theta[n_fit])
+    out = [v * rd ** _power_of(n) for n, v in zip(names, values)]
+    k0 = next(v for n, v in zip(names, out) if n == "k" or n.startswith("k[") or n == "c")
+    return np.array(out + [rd, k0 * rd])
+
+
+def _volts_result(res, plan):
+    names = list(res.param_names)
+    n_fit = len(names)
+    if plan.drive is not None:
+        inp, inp_var = plan.drive[0], plan.drive[1] ** 2
+    else:
+        inp, inp_var = plan.gamma_known[0], plan.gamma_known[1] ** 2
+    theta = np.append(np.asarray(res.values, float), inp)
+    cov_in = np.zeros((n_fit + 1, n_fit + 1))
+    c = np.asarray(res.covariance, float)
+    nan = ~np.isfinite(np.diag(c))
+    cov_in[:n_fit, :n_fit] = np.where(np.isfinite(c), c, 0.0)
+    cov_in[n_fit, n_fit] = inp_var
+    base = _outputs(theta, names, plan, n_fit)
+    jac = np.zeros((base.size, theta.size))
+    for j in range(theta.size):
+        h = 1e-6 * abs(theta[j]) if theta[j] != 0 else 1e-30
+        up, dn = theta.copy(), theta.copy()
+        up[j] += h
+        dn[j] -= h
+        jac[:, j] = (_outputs(up, names, plan, n_fit) - _outputs(dn, names, plan, n_fit)) / (2 * h)
+    cov = jac @ cov_in @ jac.T
+    if nan.any():
+        idx = np.flatnonzero(nan)
+        cov[idx, :] = 0.0
+        cov[:, idx] = 0.0
+        cov[idx, idx] = np.nan
+    rd = base[n_fit]
+    k_rec, k_err = _k_per_recording(res, names, base, cov)
+    return dataclasses.replace(
+        res, param_names=tuple(names) + ("displacement_sensitivity", "force_sensitivity"),
+        values=base, covariance=cov, k_per_recording=k_rec, k_per_recording_err=k_err,
+        interval_source=None,
+        notes=res.notes + (
+            f"volts: displacement sensitivity Rd = {rd * 1e9:.6g} +- "
+            f"{math.sqrt(cov[n_fit, n_fit]) * 1e9:.3g} nm/V from "
+            + ("the stage drive (active calibration, no Stokes assumption)"
+               if plan.drive is not None else "the known friction")
+            + f"; force sensitivity Rf = k Rd = {base[n_fit + 1] * 1e12:.6g} +- "
+            f"{math.sqrt(cov[n_fit + 1, n_fit + 1]) * 1e12:.3g} pN/V; k, gamma and eps^2 are "
+            "in SI (m), errors include the sensitivity's",))
+
+
+def _k_per_recording(res, names, base, cov):
+    """Per-recording k and error in SI from the transformed parameters (each recording's
+    k parameter found by its value in volts units; k = c P scales with its power)."""
+    k_v = np.asarray(res.k_per_recording, float)
+    values_v = np.asarray(res.values, float)
+    err = np.sqrt(np.clip(np.diag(cov), 0, None))
+    if "c" in names:
+        j = names.index("c")
+        powers = k_v / values_v[j]
+        return base[j] * powers, err[j] * powers
+    idx = [i for i, n in enumerate(names) if n == "k" or n.startswith("k[")]
+    pick = [idx[int(np.argmin(np.abs(values_v[idx] - kv)))] for kv in k_v]
+    return base[pick], err[pick]
+
+
+def finish_instrument(res, plan: Plan):
+    """The reported result: volts turned into metres with Rd and Rf (module docstring); for
+    a drive on a trace in metres, the drive's check of the position calibration."""
+    if plan.volts:
+        return _volts_result(res, plan)
+    if plan.drive is not None and "gamma" in res.param_names:
+        names = list(res.param_names)
+        rd = _rd_from_drive(np.asarray(res.values, float), names, plan.drive, plan.model)
+        se = rd * plan.drive[1] / plan.drive[0]
+        z = (rd - 1.0) / se
+        return dataclasses.replace(res, notes=res.notes + (
+            f"drive: the stage drive gives a position scale of {rd:.5g} +- {se:.2g} m per m of "
+            f"the trace ({z:+.1f} SE from 1" + ("): the position calibration and the drive "
+                                                "disagree; check the units and the stage "
+                                                "amplitude" if abs(z) > 3 else ")"),))
+    return res
