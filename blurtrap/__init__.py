@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .inference import allan_variance as allan_variance
     from .inference import calibrate as calibrate
     from .inference import calibrate_batch as calibrate_batch
+    from .inference import fit_psd as fit_psd
     from .inference import sample_posterior as sample_posterior
     from .inference import stokes_gamma_prior as stokes_gamma_prior
     from .inference import stuck_bead_prior as stuck_bead_prior
@@ -100,7 +101,7 @@ _LAZY = {
     "CalibrationResult": "inference", "FitError": "inference", "LogUniform": "inference",
     "Normal": "inference", "Posterior": "inference", "ShortChainWarning": "inference",
     "TrapModel": "inference", "Uniform": "inference", "calibrate": "inference",
-    "calibrate_batch": "inference", "sample_posterior": "inference",
+    "calibrate_batch": "inference", "fit_psd": "inference", "sample_posterior": "inference",
     "stokes_gamma_prior": "inference", "stuck_bead_prior": "inference",
     # physics
     "ExponentialKernel": "physics", "ProductKernel": "physics", "RectKernel": "physics",

@@ -60,6 +60,7 @@ from ._priors import (
 )
 from ._result import CalibrationResult as CalibrationResult
 from ._result import FitError as FitError
+from ._stored import fit_psd as fit_psd
 from ._variance import (
     drift_extrapolation as drift_extrapolation,
 )
