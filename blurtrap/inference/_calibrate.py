@@ -586,11 +586,14 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
 
 
 def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None,
-                  strict=True, fixed=None, excluded=None):
+                  strict=True, fixed=None, excluded=None, robust=False):
     args = _spectral_args(recs, layout, model, n_blocks, f_range, excluded)
     scale = _start_vector(recs, layout, model.noise, start)
     out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
     _check_fit(out, layout.names, method_name, strict, notes, recs)
+    if robust:
+        out, held, args = _robust_refit(out, held, args, scale, layout, fixed, notes,
+                                        method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
@@ -601,6 +604,39 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                     interval_source=_interval_source(spectral_nll, args, scale, out, held))
     block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
     return _check_relaxation_resolved(res, recs, method_name, block)
+
+
+#: robust spectral fit: an ordinate whose Gamma upper tail probability under the fit is below
+#: this (Bonferroni over the ordinates) is a spike and gets no weight
+ROBUST_ALPHA = 1e-3
+
+
+def _robust_refit(out, held, args, scale, layout, fixed, notes, method, strict, recs):
+    """Drop ordinates far above the fitted spectrum (spikes, lines) and refit, up to 3
+    times; the count and the frequencies go into the notes."""
+    from jax.scipy.special import gammaincc
+
+    dropped = np.zeros(np.shape(args.weight), bool)
+    for _ in range(3):
+        w = np.asarray(args.weight)
+        ratio = np.asarray(args.power / _psd_jit(out.value, args))
+        n_eff = np.where(w > 0, w, 1.0)
+        tail = np.asarray(gammaincc(n_eff, n_eff * ratio))
+        spikes = (w > 0) & (tail < ROBUST_ALPHA / max(int(np.sum(w > 0)), 1))
+        if not spikes.any():
+            break
+        dropped |= spikes
+        args = eqx.tree_at(lambda a: a.weight, args, jnp.asarray(np.where(spikes, 0.0, w)))
+        out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
+        _check_fit(out, layout.names, method, strict, notes, recs)
+    if dropped.any():
+        fr = np.asarray(args.f)[dropped]
+        shown = ", ".join(f"{v:.5g}" for v in fr[:8]) + (" ..." if fr.size > 8 else "")
+        notes.append(f"robust: {int(dropped.sum())} ordinate(s) far above the fitted spectrum "
+                     f"(Gamma tail p < {ROBUST_ALPHA:g}/M) left out: {shown} Hz")
+    else:
+        notes.append("robust: no ordinate far above the fitted spectrum")
+    return out, held, args
 
 
 @float64_scope
@@ -1085,6 +1121,12 @@ def _no_temporal_information_message(recs, info):
     )
 
 
+def _flag(name, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False; got {name} = {value!r}")
+    return bool(value)
+
+
 @float64_scope
 def calibrate(
     data,
@@ -1105,6 +1147,7 @@ def calibrate(
     anti_aliasing: bool | None = None,
     excluded_ranges=None,
     lines: str = "auto",
+    robust: bool = False,
 ) -> CalibrationResult:
     """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
 
@@ -1133,6 +1176,28 @@ def calibrate(
       quantised in steps above their standard deviation raise ``ValueError``; with
       ``strict=False`` they give a note instead. Milder quantisation (steps above std/4)
       and a few saturated frames are noted in ``result.notes``.
+    - `fixed`: parameters held at known values, ``{"gamma": 9.1e-9}`` or with a standard
+      error ``{"gamma": (9.1e-9, 0.3e-9)}`` (SI), which is propagated into the others' errors.
+    - `friction`: ``"stokes"`` holds gamma at ``6 pi eta R`` of the bead (the recordings'
+      ``bead_radius_m``, ``viscosity_Pa_s`` or water at their temperature, Faxen's factor at
+      ``distance_to_surface_m``; ``bead_radius_err_m``, ``viscosity_err_Pa_s``,
+      ``temperature_err_K`` propagated); ``"free"`` fits it (default: the recordings'
+      ``friction`` setting, else free).
+    - `detector`, `anti_aliasing`: ``"camera"`` or ``"photodiode"`` (default: the
+      recordings' settings). They choose the model when `model` is not given: exposure
+      average and folding for a camera or an integrating photodiode, neither for a
+      photodiode with anti-aliasing (fitted below 0.4 fs unless `f_range` says otherwise);
+      a ``diode_filter`` setting adds the photodiode filter (fitted, or held at given values).
+    - `excluded_ranges`: ``[(f_low, f_high), ...]`` [Hz] left out of the spectral fits.
+    - `lines`: ``"auto"`` (default) finds strong narrow lines (a drive, mains pick-up) and
+      subtracts them before the fit, naming them in the notes; ``"keep"`` fits the trace as
+      it is.
+    - `robust`: spectral fits leave out ordinates far above the fitted spectrum (spikes).
+
+    Positions in volts (``position_unit="V"``) give the displacement sensitivity Rd [m/V] and
+    force sensitivity Rf = k Rd [N/V] as parameters ``displacement_sensitivity`` and
+    ``force_sensitivity``, from the known friction or from a stage drive (active calibration:
+    a ``drive`` setting with the recorded stage positions); k, gamma, eps^2 are then in SI.
 
     **Returns:** :class:`CalibrationResult` (SI units).
 
@@ -1154,7 +1219,8 @@ def calibrate(
                               anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
                               lines=lines, f_range=f_range)
     res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
-                     plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded)
+                     plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
+                     _flag("robust", robust))
     res = finish_instrument(res, plan)
     if not plan.volts:
         data_notes += tuple(_stokes_notes(recs, radii, res))
@@ -1225,8 +1291,11 @@ def _stokes_notes(recs, radii, res) -> list:
 
 
 def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,
-               strict, fixed=None, excluded=None):
+               strict, fixed=None, excluded=None, robust=False):
     notes: list[str] = []
+    if robust and method not in ("auto", "likelihood", "psd"):
+        raise ValueError(f"robust=True applies to the spectral methods (Whittle likelihood, "
+                         f"psd); got method = {method!r}")
     fixed = fixed or {}
     if fixed and method not in ("auto", "likelihood", "psd"):
         raise ValueError(f"fixed = {sorted(fixed)} applies to the likelihood and psd methods; "
@@ -1300,10 +1369,10 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
         use = likelihood
         if use == "auto":
             use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
-            if (f_range is not None or excluded) and use == "exact":
+            if (f_range is not None or excluded or robust) and use == "exact":
                 use = "whittle"
-                notes.append(("f_range" if f_range is not None else "excluded ranges")
-                             + " given: the Whittle likelihood over that band (the exact "
+                notes.append(("f_range" if f_range is not None else "excluded ranges"
+                              if excluded else "robust") + " given: the Whittle likelihood over that band (the exact "
                              "likelihood uses every frequency)")
         if use == "exact" and not mdl.alias:
             if likelihood == "exact":
@@ -1317,8 +1386,8 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
                                  "model only; use likelihood='whittle' with effects "
                                  f"{[e.name for e in mdl.extra]}")
             use = "whittle"
-        exact_ok = (not mdl.extra and f_range is None and not excluded and mdl.alias
-                    and mdl.closed_form)
+        exact_ok = (not mdl.extra and f_range is None and not excluded and not robust
+                    and mdl.alias and mdl.closed_form)
         if use == "whittle" and likelihood == "auto" and exact_ok:
             ks, gs = zip(*[moment_start(r)[:2] for r in recs])
             if _leakage_index(recs, ks, float(np.median(gs))) > _LEAKAGE_INDEX_MAX:
@@ -1330,7 +1399,7 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
                 notes.append("likelihood: exact")
             return _fit_exact(recs, layout, mdl, notes, fixed)
         res = _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", list(notes), start,
-                            strict, fixed, excluded)
+                            strict, fixed, excluded, robust)
         p = res.params
         if "gamma" in p and "c" not in p:
             kvals = res.k_per_recording
@@ -1364,7 +1433,7 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
             notes.append(f"psd: {nb} blocks of {n_min // nb} frames (>= 100 tau each where "
                          "the record allows)")
         res = _fit_spectral(recs, layout, mdl, int(nb), f_range, "psd", notes, start, strict,
-                            fixed, excluded)
+                            fixed, excluded, robust)
         return _check_psd_blocks(res, recs, int(nb), explicit=n_blocks is not None)
     if method == "allan":
         return _fit_allan(recs, layout, mdl, notes)
