@@ -50,6 +50,19 @@ _MAX_PLAUSIBLE_POSITION_STD_M = 1e-5
 _TYPICAL_POSITION_STD_M = 1e-8  # to pick the likeliest unit when several would fit
 _UNIT_METRES = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
 _UNIT_WORDS = {"m": "metres", "mm": "mm", "um": "um", "nm": "nm", "px": "px"}
+# Plausible fluctuation of a position-detector signal in volts (a QPD / PSD behind its
+# amplifier, positions not yet converted with the displacement sensitivity beta [m/V]):
+# beta is ~1e-8..1e-5 m/V, the bead's std 0.6..200 nm, so the signal's std is ~1e-4..10 V,
+# and ADC ranges are +-10 V at most. 1e-7 V leaves 1000x below; anything in metres (std
+# ~1e-11..1e-5) declared as volts stays below it up to a std of 0.1 um. 100 V is 10x any ADC
+# range: nm, pixels or mV declared as volts.
+_MIN_PLAUSIBLE_POSITION_STD_V = 1e-7
+_MAX_PLAUSIBLE_POSITION_STD_V = 100.0
+#: units of the positions a Recording holds
+RECORDING_UNITS = ("m", "V")
+# A driven (nano)stage moves the sample by ~10 nm..1 um peak at the drive frequency, within a
+# travel of ~100 um: a stage std above 1e-4 m is nm or um declared as metres.
+_MAX_PLAUSIBLE_STAGE_STD_M = 1e-4
 
 
 def in_ms_message(name: str, value: float) -> str:
@@ -64,10 +77,14 @@ def in_ms_message(name: str, value: float) -> str:
 
 
 def check_positions(positions, check_units: bool, declared_unit: str = "m") -> tuple[np.ndarray, str | None]:
-    arr = numeric_array(positions, "positions", "m")
+    """``positions`` as a new float64 1-D array, and the input dtype's name when it was not
+    float64. `declared_unit` is the unit they were given in (``"V"``: volts, kept as such;
+    anything else: converted to metres already)."""
+    u = "V" if declared_unit == "V" else "m"
+    arr = numeric_array(positions, "positions", u)
     if arr.ndim != 1:
         raise ValueError(
-            f"positions must be a 1-D array (one trace) [m]; got shape {arr.shape}. "
+            f"positions must be a 1-D array (one trace) [{u}]; got shape {arr.shape}. "
             "For several traces use blurtrap.data.from_arrays (rows = recordings)."
         )
     note = None if arr.dtype == np.float64 else arr.dtype.name
@@ -88,7 +105,9 @@ def check_positions(positions, check_units: bool, declared_unit: str = "m") -> t
             f"positions is constant (zero variance; every value = {float(arr[0])!r}): a trapped "
             "bead always fluctuates, so this is not a position trace"
         )
-    if check_units:  # (unchecked: no overflow in np.std for |x| > 1e154)
+    if check_units and declared_unit == "V":
+        _check_volts_scale(float(np.std(arr)))
+    elif check_units:  # (unchecked: no overflow in np.std for |x| > 1e154)
         _check_position_scale(float(np.std(arr)), declared_unit)
     return arr, note
 
@@ -138,7 +157,10 @@ def _check_position_scale(std: float, declared: str) -> None:
     elif likely is None:
         slip = f"positions do not look like {word}"
     elif declared == "m" and not low:
-        slip = f"positions look like {_UNIT_WORDS[likely]} or pixels, not metres"
+        slip = (
+            f"positions look like {_UNIT_WORDS[likely]} or pixels, not metres (or a detector "
+            "signal in volts: declare position_unit='V')"
+        )
     else:
         slip = f"positions look like {_UNIT_WORDS[likely]} declared as {word}"
     fix = (
@@ -153,3 +175,53 @@ def _check_position_scale(std: float, declared: str) -> None:
         "check_units=False"
     )
 
+
+
+def _check_volts_scale(std: float) -> None:
+    """Raise if a signal declared in volts has a std no detector signal shows."""
+    if _MIN_PLAUSIBLE_POSITION_STD_V <= std <= _MAX_PLAUSIBLE_POSITION_STD_V:
+        return
+    if std < _MIN_PLAUSIBLE_POSITION_STD_V:
+        what = (
+            f"below {_g(_MIN_PLAUSIBLE_POSITION_STD_V)} V, less than any position detector's "
+            "signal fluctuates (~1e-4..10 V): these look like positions in metres declared as "
+            "volts. Declare the unit the numbers are in (position_unit='m', a column x_m; "
+            "arrays in metres need no unit)"
+        )
+    else:
+        what = (
+            f"above {_g(_MAX_PLAUSIBLE_POSITION_STD_V)} V, more than any detector amplifier "
+            "outputs (ADC ranges are +-10 V at most): these look like nm, pixels or mV "
+            "declared as volts. Declare the unit the numbers are in (e.g. position_unit='nm' "
+            "or a column x_nm), or convert mV to V"
+        )
+    raise ValueError(
+        f"positions declared in volts (position_unit 'V') have standard deviation {_g(std)} V, "
+        f"{what}, or pass check_units=False"
+    )
+
+
+def check_stage(stage, n: int, check_units: bool) -> np.ndarray:
+    """The stage positions [m] as a new float64 array of `n` finite values (one per frame)."""
+    arr = numeric_array(stage, "stage", "m")
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise ValueError(
+            f"stage must be a 1-D array with one stage position per frame ({n}) [m]; got shape "
+            f"{arr.shape}"
+        )
+    arr = np.array(arr, dtype=np.float64, copy=True)
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise ValueError(
+            f"stage contains {bad.size} non-finite value(s) (NaN/inf); first: stage[{bad[0]}] = "
+            f"{float(arr[bad[0]])!r}"
+        )
+    std = float(np.std(arr))
+    if check_units and std > _MAX_PLAUSIBLE_STAGE_STD_M:
+        raise ValueError(
+            f"stage has standard deviation {_g(std)} m, above {_g(_MAX_PLAUSIBLE_STAGE_STD_M)} m "
+            "(100 um), more than a calibration drive moves a stage (~10 nm..1 um): the stage "
+            "positions look like nm or um, not metres. Pass metres (a CSV column stage_nm or "
+            "stage_um is converted), or check_units=False"
+        )
+    return arr

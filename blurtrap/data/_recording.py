@@ -8,6 +8,7 @@ conversions that are made (integer or float32 positions -> float64) are noted in
 from __future__ import annotations
 
 import types
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -19,7 +20,7 @@ from ._plausible import _MAX_PLAUSIBLE_POSITION_STD_M as _MAX_PLAUSIBLE_POSITION
 from ._plausible import _MAX_PLAUSIBLE_TEMPERATURE_K as _MAX_PLAUSIBLE_TEMPERATURE_K
 from ._plausible import _MIN_PLAUSIBLE_POSITION_STD_M as _MIN_PLAUSIBLE_POSITION_STD_M
 from ._plausible import _MIN_PLAUSIBLE_TEMPERATURE_K as _MIN_PLAUSIBLE_TEMPERATURE_K
-from ._plausible import check_positions, declared_unit, in_ms_message
+from ._plausible import RECORDING_UNITS, check_positions, check_stage, declared_unit, in_ms_message
 from ._timing import DEFAULT_TIMING_TOLERANCE as DEFAULT_TIMING_TOLERANCE
 from ._timing import TimingJitter as TimingJitter
 from ._timing import check_times
@@ -36,22 +37,33 @@ class Recording:
 
     **Arguments:**
 
-    - `positions`: 1-D array of positions [m]. Integer or float32 input is converted to
-      float64 and the original dtype recorded in ``metadata["input_dtype"]``. numpy or JAX.
+    - `positions`: 1-D array of positions [m], or [V] for a detector signal whose
+      displacement sensitivity is not known (``position_unit="V"``). Integer or float32 input
+      is converted to float64 and the original dtype recorded in ``metadata["input_dtype"]``.
+      numpy or JAX.
     - `frame_interval`: time between frame starts, :math:`\Delta t` [s].
     - `exposure`: integration time per frame, :math:`W` [s], ``0 < W <= frame_interval``.
     - `temperature`: [K] (default 295).
     - `times`: optional frame time stamps [s], strictly increasing and regular to within
       ``timing_tolerance * frame_interval`` of a regular grid.
     - `laser_power`: trapping laser power [W], or None when unknown.
-    - `metadata`: free-form JSON-like mapping (stored as a read-only copy).
+    - `stage`: optional stage (nanostage) positions at the frame times [m], one per frame,
+      for an active calibration with a driven stage (``metadata["drive"]``).
+    - `position_unit`: ``"m"`` or ``"V"``: the unit of `positions`. Stored as
+      ``metadata["position_unit"]`` (which it sets for ``"V"``); None (default) takes it from
+      there: ``"V"`` there means volts, anything else (or nothing) metres (the loaders note
+      the unit a file gave before converting it to metres, e.g. ``"nm"``).
+    - `metadata`: free-form JSON-like mapping (stored as a read-only copy). The instrument
+      keys (``detector``, ``bead_radius_m``, ``drive``, ...) are read and validated by
+      :func:`instrument_settings`.
     - `name`: optional label.
     - `allow_irregular`: keep irregular time stamps instead of raising; see `timing_jitter`.
     - `timing_tolerance`: relative tolerance for time stamps (default 1e-3).
     - `check_units`: run the unit-slip heuristics (temperature outside 100..400 K, frame
-      interval or exposure >= 0.1 s, position std outside 2e-11..1e-5 m, laser power > 10 W). Default True. The position
-      check names the likely unit, using ``metadata["position_unit"]`` (set by the loaders
-      and :func:`from_arrays`) as the declared one.
+      interval or exposure >= 0.1 s, position std outside 2e-11..1e-5 m (1e-7..100 V in
+      volts), stage std above 1e-4 m, laser power > 10 W). Default True. The position check
+      names the likely unit, using ``metadata["position_unit"]`` (set by the loaders and
+      :func:`from_arrays`) as the declared one.
 
     **Raises:** ``ValueError`` for any invalid or implausible input, with the value and a hint.
     """
@@ -69,6 +81,7 @@ class Recording:
         "_timing_tolerance",
         "_check_units",
         "_jitter",
+        "_stage",
     )
 
     def __init__(
@@ -85,9 +98,15 @@ class Recording:
         allow_irregular: bool = False,
         timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
         check_units: bool = True,
+        stage=None,
+        position_unit: str | None = None,
     ):
         check_units = bool(check_units)
-        pos, dtype_note = check_positions(positions, check_units, declared_unit(metadata))
+        unit = _position_unit(position_unit, metadata)
+        pos, dtype_note = check_positions(
+            positions, check_units, "V" if unit == "V" else declared_unit(metadata)
+        )
+        stage_arr = None if stage is None else check_stage(stage, pos.shape[0], check_units)
 
         dt = scalar("frame_interval", frame_interval, "s")
         if dt <= 0:
@@ -151,12 +170,16 @@ class Recording:
         meta = dict(frozen)
         if dtype_note is not None:
             meta.setdefault("input_dtype", dtype_note)
+        if unit == "V":
+            meta["position_unit"] = "V"
         if times is None:
             t, jitter = None, None
         else:
             t, jitter = check_times(times, pos.shape[0], dt, tol, bool(allow_irregular))
             t.flags.writeable = False
         pos.flags.writeable = False
+        if stage_arr is not None:
+            stage_arr.flags.writeable = False
 
         s = object.__setattr__
         s(self, "_positions", pos)
@@ -171,6 +194,7 @@ class Recording:
         s(self, "_timing_tolerance", tol)
         s(self, "_check_units", check_units)
         s(self, "_jitter", jitter)
+        s(self, "_stage", stage_arr)
 
     # -- immutability -------------------------------------------------------------------
     def __setattr__(self, key, value):
@@ -184,6 +208,16 @@ class Recording:
     def positions(self) -> np.ndarray:
         """Positions [m], float64, read-only."""
         return self._positions
+
+    @property
+    def position_unit(self) -> str:
+        """``"m"`` (positions in metres) or ``"V"`` (a detector signal in volts)."""
+        return "V" if self._metadata.get("position_unit") == "V" else "m"
+
+    @property
+    def stage(self) -> np.ndarray | None:
+        """Stage positions at the frame times [m] (read-only), or None."""
+        return self._stage
 
     @property
     def frame_interval(self) -> float:
@@ -270,24 +304,32 @@ class Recording:
             allow_irregular=self._allow_irregular,
             timing_tolerance=self._timing_tolerance,
             check_units=self._check_units,
+            stage=self._stage,
+            position_unit=None,  # kept in metadata
         )
         unknown = set(changes) - set(fields)
         if unknown:
             raise ValueError(f"replace() got unknown field(s) {sorted(unknown)}")
+        new_meta = changes.get("metadata")
+        if (
+            "metadata" in changes
+            and changes.get("position_unit") is None
+            and self.position_unit == "V"
+            and not (isinstance(new_meta, Mapping) and "position_unit" in new_meta)
+        ):
+            changes["position_unit"] = "V"  # new metadata without a unit: still volts
         fields.update(changes)
         return Recording(**fields)
 
     def __eq__(self, other):
         if not isinstance(other, Recording):
             return NotImplemented
-        same_times = (self._times is None and other._times is None) or (
-            self._times is not None
-            and other._times is not None
-            and np.array_equal(self._times, other._times)
-        )
+        same_times = _same_optional(self._times, other._times)
+        same_stage = _same_optional(self._stage, other._stage)
         return (
             np.array_equal(self._positions, other._positions)
             and same_times
+            and same_stage
             and self._frame_interval == other._frame_interval
             and self._exposure == other._exposure
             and self._temperature == other._temperature
@@ -307,5 +349,33 @@ class Recording:
             f"Recording(name={self._name!r}, n_frames={self.n_frames}, "
             f"frame_interval={_g(self._frame_interval)} s, exposure={_g(self._exposure)} s, "
             f"temperature={_g(self._temperature)} K, laser_power={power}, "
-            f"times={'yes' if self._times is not None else 'no'})"
+            f"times={'yes' if self._times is not None else 'no'}"
+            + (", position_unit='V'" if self.position_unit == "V" else "")
+            + (", stage=yes" if self._stage is not None else "")
+            + ")"
         )
+
+
+def _same_optional(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+
+def _position_unit(given, metadata) -> str:
+    """``"m"`` or ``"V"`` from the `position_unit` argument, else from the metadata."""
+    meta_unit = declared_unit(metadata)
+    if given is None:
+        return "V" if meta_unit == "V" else "m"
+    if given not in RECORDING_UNITS:
+        raise ValueError(
+            f"position_unit must be 'm' (positions in metres) or 'V' (a detector signal in "
+            f"volts); got {given!r}. Positions in other length units: convert them to metres "
+            "(blurtrap.data.from_arrays(..., position_unit=...) does)"
+        )
+    raw = metadata.get("position_unit") if isinstance(metadata, Mapping) else None
+    if raw is not None and (given == "V") != (meta_unit == "V"):
+        raise ValueError(
+            f"position_unit = {given!r} but metadata['position_unit'] = {raw!r}; they must "
+            "agree (metadata['position_unit'] 'V' means volts; another unit, the one the "
+            "positions were given in before conversion to metres)"
+        )
+    return given
