@@ -1,4 +1,5 @@
-"""CSV recordings: header ``t_s,x_<unit>`` (or just ``x_<unit>``), one frame per line.
+"""CSV recordings: header ``t_s,x_<unit>`` (or just ``x_<unit>``), one frame per line, and
+optionally a third column ``stage_<unit>`` (a driven stage's position; nm, um, mm or m).
 
 Every problem is reported with the file, the 1-based line number (the header is line 1) and
 the offending text. UTF-8 with or without BOM, LF / CRLF / CR line endings are accepted.
@@ -26,6 +27,8 @@ from ._units import (
 )
 
 TIME_COLUMN = "t_s"
+STAGE_PREFIX = "stage_"
+_STAGE_UNITS = ("m", "mm", "um", "nm")
 _ON_BAD_ROWS = ("error", "exclude")
 
 
@@ -132,23 +135,26 @@ def _line_blocks(path: Path):
 
 
 def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
+    """``(colnames, has_time, unit, px, stage_unit or None)`` of a header
+    ``[t_s,]x_<unit>[,stage_<unit>]``."""
     cols = [c.strip() for c in header.split(",")]
     expected = (
-        f"'{TIME_COLUMN},x_<unit>' or 'x_<unit>' with <unit> one of {', '.join(ALLOWED_UNITS)}"
+        f"'{TIME_COLUMN},x_<unit>' or 'x_<unit>' with <unit> one of {', '.join(ALLOWED_UNITS)}, "
+        f"optionally followed by a stage column '{STAGE_PREFIX}<unit>' (nm, um, mm or m)"
     )
     if all(parse_number(c) is not None for c in cols if c):
         raise ValueError(
             f"{path}, line 1: found data {_short(header)} where the header was expected; "
             f"the first line must name the columns, e.g. 't_s,x_nm' ({expected})"
         )
-    if len(cols) == 2 and cols[0].lower() == TIME_COLUMN:
-        has_time, xcol = True, cols[1]
-    elif len(cols) == 1:
-        has_time, xcol = False, cols[0]
-    else:
+    has_time = bool(cols) and cols[0].lower() == TIME_COLUMN
+    rest = cols[1:] if has_time else cols
+    stage_col = rest[1] if len(rest) == 2 and rest[1].lower().startswith(STAGE_PREFIX) else None
+    if not (len(rest) == 1 or stage_col is not None):
         raise ValueError(
             f"{path}, line 1: header {_short(header)} has columns {cols}; expected {expected}"
         )
+    xcol = rest[0]
     if not xcol.lower().startswith("x_"):
         raise ValueError(
             f"{path}, line 1: position column {xcol!r} not understood; expected {expected}"
@@ -165,7 +171,20 @@ def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
                 f"{position_unit!r} was given; they must agree"
             )
     px = check_pixel_size(unit, pixel_size_m, where=str(path))
-    return has_time, xcol, unit, px
+    stage_unit = None
+    if stage_col is not None:
+        text = stage_col[len(STAGE_PREFIX) :]
+        try:
+            stage_unit = canonical_unit(text, what=f"unit of column {stage_col!r}")
+        except ValueError:
+            stage_unit = None
+        if stage_unit not in _STAGE_UNITS:
+            raise ValueError(
+                f"{path}, line 1: stage column {stage_col!r} must name a length unit: "
+                f"{', '.join(STAGE_PREFIX + u for u in _STAGE_UNITS)} (the stage position is "
+                "converted to metres)"
+            )
+    return cols, has_time, unit, px, stage_unit
 
 
 class _RowParser:
@@ -179,20 +198,27 @@ class _RowParser:
     excludes the bad rows; both paths give the same float64 bits for the same text.
     """
 
-    def __init__(self, path, has_time, xcol, unit, on_bad_rows):
+    def __init__(self, path, colnames, has_time, unit, stage_unit, on_bad_rows):
         self.path = path
         self.has_time = has_time
-        self.ncols = 2 if has_time else 1
+        self.has_stage = stage_unit is not None
+        self.colnames = list(colnames)
+        self.ncols = len(self.colnames)
+        self.i_pos = 1 if has_time else 0
         p = decimal_exponent(unit)
-        self.p_pos = 0 if p is None else p
-        self.colnames = [TIME_COLUMN, xcol] if has_time else [xcol]
-        self.scales = (0, self.p_pos) if has_time else (self.p_pos,)  # t_s is already SI
-        self.suffix = f"e-{self.p_pos}".encode() if self.p_pos else b""
+        scales = [0] * self.ncols  # t_s is already SI
+        scales[self.i_pos] = 0 if p is None else p
+        if stage_unit is not None:
+            scales[-1] = decimal_exponent(stage_unit) or 0
+        self.scales = tuple(scales)
+        # exact scaling of the text by the vectorised path: an exponent appended to the cells
+        self.suffixes = {c: f"e-{q}".encode() for c, q in enumerate(scales) if q}
         self.on_bad_rows = on_bad_rows
         self.lineno = 2  # line number of the next data line (the header is line 1)
         self.prev_t, self.prev_line, self.prev_cell = -math.inf, 0, ""
         self.times: list[np.ndarray] = []
         self.positions: list[np.ndarray] = []
+        self.stage: list[np.ndarray] = []
         self.excluded: list[tuple[int, str]] = []
 
     @property
@@ -206,15 +232,18 @@ class _RowParser:
         self.lineno += n
 
     def result(self):
-        """``(times or None, positions, excluded)``; the per-block parts are released one
-        column at a time, so the peak is the output plus one column."""
-        times = None
+        """``(times or None, positions, stage or None, excluded)``; the per-block parts are
+        released one column at a time, so the peak is the output plus one column."""
+        times = stage = None
         if self.has_time:
             times = np.concatenate(self.times) if self.times else np.zeros(0)
             self.times.clear()
         pos = np.concatenate(self.positions) if self.positions else np.zeros(0)
         self.positions.clear()
-        return times, pos, self.excluded
+        if self.has_stage:
+            stage = np.concatenate(self.stage) if self.stage else np.zeros(0)
+            self.stage.clear()
+        return times, pos, stage, self.excluded
 
     # -- vectorised path ------------------------------------------------------------------
     def _fast(self, block: bytes, n: int) -> bool:
@@ -226,13 +255,16 @@ class _RowParser:
         if np.any((arr < 32) & (arr != 10) & (arr != 9)):
             return False  # control characters: the line-by-line parser reports them
         nl = np.flatnonzero(arr == 10)
-        if self.ncols == 2:
-            cm = np.flatnonzero(arr == 44)
-            # exactly one comma on every line
-            if cm.size != n or np.any(cm > nl) or np.any(cm[1:] < nl[:-1]):
+        ncols = self.ncols
+        cm = np.flatnonzero(arr == 44)
+        if ncols >= 2:
+            # exactly ncols - 1 commas on every line (the block ends with a line break)
+            if cm.size != n * (ncols - 1):
+                return False
+            if np.any(np.bincount(np.searchsorted(nl, cm), minlength=n) != ncols - 1):
                 return False
             ends = np.flatnonzero((arr == 44) | (arr == 10))
-        elif b"," in block:
+        elif cm.size:
             return False
         else:
             ends = nl
@@ -246,11 +278,25 @@ class _RowParser:
         before = np.where(starts > 0, filled[starts - 1], 0)
         if np.any(filled[ends - 1] == before):
             return False
-        if self.suffix:
+        if self.suffixes:
             e_at = np.flatnonzero((arr | 32) == 101)  # 'e' or 'E'
-            if e_at.size and (self.ncols == 1 or np.any(e_at > cm[np.searchsorted(nl, e_at)])):
-                return False  # an exponent in a position cell: scaled by the exact slow path
-            text = block.replace(b"\n", self.suffix + b",")
+            if e_at.size:
+                # column of each exponent: the commas before it on its line
+                col = np.searchsorted(cm, e_at) - np.searchsorted(nl, e_at) * (ncols - 1)
+                if np.any(np.isin(col, list(self.suffixes))):
+                    return False  # an exponent in a scaled cell: scaled by the exact slow path
+            where = [ends[c::ncols] for c in self.suffixes]
+            idx = np.concatenate(
+                [np.repeat(w, len(sfx)) for w, sfx in zip(where, self.suffixes.values())]
+            )
+            add = np.concatenate(
+                [
+                    np.tile(np.frombuffer(sfx, dtype=np.uint8), w.size)
+                    for w, sfx in zip(where, self.suffixes.values())
+                ]
+            )
+            # equal indices keep their order: each cell gets its exponent text, in order
+            text = np.insert(arr, idx, add).tobytes().replace(b"\n", b",")
         else:
             text = block.replace(b"\n", b",")
         try:
@@ -259,18 +305,20 @@ class _RowParser:
                 vals = np.fromstring(text, dtype=np.float64, sep=",")
         except (ValueError, DeprecationWarning):
             return False
-        if vals.size != n * self.ncols or not np.all(np.isfinite(vals)):
+        if vals.size != n * ncols or not np.all(np.isfinite(vals)):
             return False
-        vals = vals.reshape(n, self.ncols)
+        vals = vals.reshape(n, ncols)
         if self.has_time:
             t = vals[:, 0]
             if not (t[0] > self.prev_t and np.all(t[1:] > t[:-1])):
                 return False
-            last = block[(nl[-2] + 1 if n > 1 else 0) : cm[-1]]
+            last = block[(nl[-2] + 1 if n > 1 else 0) : cm[-(ncols - 1)]]
             self.prev_t, self.prev_line = float(t[-1]), self.lineno + n - 1
             self.prev_cell = last.decode("ascii").strip()
             self.times.append(t.copy())
-        self.positions.append(vals[:, -1].copy())
+        self.positions.append(vals[:, self.i_pos].copy())
+        if self.has_stage:
+            self.stage.append(vals[:, -1].copy())
         return True
 
     # -- line by line: exact error reports ------------------------------------------------
@@ -278,6 +326,7 @@ class _RowParser:
         ncols, colnames = self.ncols, self.colnames
         times: list[float] = []
         pos: list[float] = []
+        stage: list[float] = []
         for lineno, line in enumerate(lines, start=self.lineno):
             fields = line.split(",")
             problem = None
@@ -318,16 +367,21 @@ class _RowParser:
             if self.has_time:
                 self.prev_t, self.prev_line, self.prev_cell = values[0], lineno, fields[0].strip()
                 times.append(values[0])
-            pos.append(values[-1])
+            pos.append(values[self.i_pos])
+            if self.has_stage:
+                stage.append(values[-1])
         if self.has_time:
             self.times.append(np.array(times, dtype=np.float64))
         self.positions.append(np.array(pos, dtype=np.float64))
+        if self.has_stage:
+            self.stage.append(np.array(stage, dtype=np.float64))
 
 
 def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
     """Stream ``path``: header checks, then the rows block by block.
 
-    Returns ``(times or None, positions [m], excluded rows, number of data lines, unit)``."""
+    Returns ``(times or None, positions [m or V], stage [m] or None, excluded rows, number of
+    data lines, unit)``."""
     blocks = _line_blocks(path)
     first = next(blocks, None)
     if first is None:
@@ -336,18 +390,18 @@ def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
         )
     cut = first.index(b"\n")
     header = first[:cut].decode("utf-8")
-    has_time, xcol, unit, px = _parse_header(path, header, position_unit, pixel_size_m)
-    parser = _RowParser(path, has_time, xcol, unit, on_bad_rows)
+    colnames, has_time, unit, px, stage_unit = _parse_header(path, header, position_unit, pixel_size_m)
+    parser = _RowParser(path, colnames, has_time, unit, stage_unit, on_bad_rows)
     if cut + 1 < len(first):
         parser.feed(first[cut + 1 :])
     del first
     for block in blocks:
         parser.feed(block)
-    times, positions, excluded = parser.result()
+    times, positions, stage, excluded = parser.result()
     if decimal_exponent(unit) is None:
         assert px is not None  # check_pixel_size requires a pixel size for 'px'
         positions = positions * px
-    return times, positions, excluded, parser.n_lines, unit
+    return times, positions, stage, excluded, parser.n_lines, unit
 
 
 def infer_frame_interval(times: np.ndarray, tol: float = DEFAULT_TIMING_TOLERANCE) -> float:
@@ -377,7 +431,8 @@ def load_csv(
     timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
     check_units: bool = True,
 ) -> Recording:
-    """Load one recording from a CSV file with header ``t_s,x_<unit>`` (or ``x_<unit>``).
+    """Load one recording from a CSV file with header ``t_s,x_<unit>`` (or ``x_<unit>``),
+    optionally followed by a stage column ``stage_<unit>`` (``Recording.stage``, in metres).
 
     **Arguments:**
 
@@ -388,7 +443,9 @@ def load_csv(
     - `temperature`: [K]; None means 295 K, noted in ``metadata["defaults_applied"]``.
     - `laser_power`: [W] or None.
     - `position_unit`: the unit the file must be in; None takes it from the header. One of
-      m, mm, um (µm), nm, px (needs `pixel_size_m` [m]).
+      m, mm, um (µm), nm, px (needs `pixel_size_m` [m]), or V (a detector signal in volts,
+      kept in volts: ``Recording.position_unit == "V"``). A header that names another unit
+      is an error.
     - `on_bad_rows`: ``"error"`` (default) raises at the first bad row; ``"exclude"`` drops
       bad rows, records ``{"count", "lines", "reasons"}`` in ``metadata["excluded_rows"]``
       and warns with :class:`ExcludedRowsWarning`.
@@ -400,7 +457,7 @@ def load_csv(
     path = Path(os.fspath(path))
     if on_bad_rows not in _ON_BAD_ROWS:
         raise ValueError(f"on_bad_rows must be one of {_ON_BAD_ROWS}; got {on_bad_rows!r}")
-    times, positions, excluded, n_data, unit = _read_csv(
+    times, positions, stage, excluded, n_data, unit = _read_csv(
         path, position_unit, pixel_size_m, on_bad_rows
     )
     if positions.shape[0] == 0:
@@ -450,6 +507,7 @@ def load_csv(
             allow_irregular=allow_irregular,
             timing_tolerance=timing_tolerance,
             check_units=check_units,
+            stage=stage,
         )
     except ValueError as e:
         extra = (
@@ -477,9 +535,17 @@ def load_csv(
 
 
 def write_csv(recording: Recording, path, position_unit: str = "nm", pixel_size_m=None) -> None:
-    """Write ``t_s,x_<unit>`` with exact decimal text (a reload gives the same float64 bits
-    for m/mm/um/nm). Recordings without time stamps get ``t_s = i * frame_interval``."""
+    """Write ``t_s,x_<unit>`` (and ``stage_nm`` when the recording has a stage) with exact
+    decimal text (a reload gives the same float64 bits for m/mm/um/nm/V). Recordings without
+    time stamps get ``t_s = i * frame_interval``. A recording in volts is written in ``V``
+    only, one in metres in a length unit only."""
     unit = canonical_unit(position_unit)
+    if (unit == "V") != (recording.position_unit == "V"):
+        raise ValueError(
+            f"position_unit = {position_unit!r} but the recording's positions are in "
+            f"{'volts' if recording.position_unit == 'V' else 'metres'}: write "
+            f"{'volts as V' if recording.position_unit == 'V' else 'metres in a length unit'}"
+        )
     px = check_pixel_size(unit, pixel_size_m)
     p = decimal_exponent(unit)
     pos = recording.positions
@@ -490,6 +556,13 @@ def write_csv(recording: Recording, path, position_unit: str = "nm", pixel_size_
     t = recording.times
     if t is None:
         t = np.arange(recording.n_frames, dtype=np.float64) * recording.frame_interval
-    rows = [f"{TIME_COLUMN},x_{unit}"]
+    header = f"{TIME_COLUMN},x_{unit}"
+    if recording.stage is not None:
+        header += f",{STAGE_PREFIX}nm"
+        cells = [
+            f"{x},{format_scaled(z, 9)}"
+            for x, z in zip(cells, recording.stage.tolist(), strict=True)
+        ]
+    rows = [header]
     rows.extend(f"{ti!r},{x}" for ti, x in zip(t.tolist(), cells, strict=True))
     Path(os.fspath(path)).write_text("\n".join(rows) + "\n", encoding="utf-8", newline="\n")
