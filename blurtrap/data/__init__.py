@@ -1,9 +1,11 @@
 """Recordings and their I/O: containers, validation, CSV / NPZ / manifest files, and
 instrument files (HDF5: Bluelake and plain datasets; LabVIEW TDMS).
 
-Positions are in metres and times in seconds. numpy only: importing this subpackage does
-not import jax itself (JAX arrays are accepted as input). The instrument-file loaders import
-their optional dependencies (h5py, npTDMS) only when called.
+Positions are in metres (or volts, for a detector signal not yet converted:
+``Recording.position_unit``) and times in seconds; the instrument settings (detector, bead,
+drive, fit ranges) are in the metadata, read by ``instrument_settings``. numpy only:
+importing this subpackage does not import jax itself (JAX arrays are accepted as input). The
+instrument-file loaders import their optional dependencies (h5py, npTDMS) only when called.
 """
 
 from ._csv import ExcludedRowsWarning as ExcludedRowsWarning
@@ -11,6 +13,8 @@ from ._csv import infer_frame_interval as infer_frame_interval
 from ._csv import load_csv as load_csv
 from ._h5 import load_bluelake as load_bluelake
 from ._h5 import load_h5 as load_h5
+from ._instrument import INSTRUMENT_KEYS as INSTRUMENT_KEYS
+from ._instrument import instrument_settings as instrument_settings
 from ._io import from_arrays as from_arrays
 from ._io import load as load
 from ._manifest import load_manifest as load_manifest

@@ -1,4 +1,5 @@
-"""CSV recordings: header ``t_s,x_<unit>`` (or just ``x_<unit>``), one frame per line.
+"""CSV recordings: header ``t_s,x_<unit>`` (or just ``x_<unit>``), one frame per line, and
+optionally a third column ``stage_<unit>`` (a driven stage's position; nm, um, mm or m).
 
 Every problem is reported with the file, the 1-based line number (the header is line 1) and
 the offending text. UTF-8 with or without BOM, LF / CRLF / CR line endings are accepted.
@@ -8,13 +9,15 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .._constants import DEFAULT_TEMPERATURE
+from ._csv_rows import TIME_COLUMN as TIME_COLUMN
+from ._csv_rows import _RowParser as _RowParser
+from ._csv_rows import _short
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
 from ._units import (
     ALLOWED_UNITS,
@@ -25,7 +28,8 @@ from ._units import (
     parse_number,
 )
 
-TIME_COLUMN = "t_s"
+STAGE_PREFIX = "stage_"
+_STAGE_UNITS = ("m", "mm", "um", "nm")
 _ON_BAD_ROWS = ("error", "exclude")
 
 
@@ -33,13 +37,8 @@ class ExcludedRowsWarning(UserWarning):
     """Rows of a CSV file were excluded because ``on_bad_rows="exclude"`` was requested."""
 
 
-def _short(text: str, n: int = 60) -> str:
-    return repr(text if len(text) <= n else text[:n] + "...")
-
-
 _BLOCK_BYTES = 1 << 20  # bytes read at a time; blocks always end at a line break
 _BOM = b"\xef\xbb\xbf"
-_TRAILING_BLANKS = re.compile(rb"[ \t]+\n")
 
 
 def _has_lf(path: Path) -> bool:
@@ -132,23 +131,26 @@ def _line_blocks(path: Path):
 
 
 def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
+    """``(has_time, xcol, unit, px)`` of a header ``[t_s,]x_<unit>[,stage_<unit>]`` (the
+    stage column: :func:`_stage_column`)."""
     cols = [c.strip() for c in header.split(",")]
     expected = (
-        f"'{TIME_COLUMN},x_<unit>' or 'x_<unit>' with <unit> one of {', '.join(ALLOWED_UNITS)}"
+        f"'{TIME_COLUMN},x_<unit>' or 'x_<unit>' with <unit> one of {', '.join(ALLOWED_UNITS)}, "
+        f"optionally followed by a stage column '{STAGE_PREFIX}<unit>' (nm, um, mm or m)"
     )
     if all(parse_number(c) is not None for c in cols if c):
         raise ValueError(
             f"{path}, line 1: found data {_short(header)} where the header was expected; "
             f"the first line must name the columns, e.g. 't_s,x_nm' ({expected})"
         )
-    if len(cols) == 2 and cols[0].lower() == TIME_COLUMN:
-        has_time, xcol = True, cols[1]
-    elif len(cols) == 1:
-        has_time, xcol = False, cols[0]
-    else:
+    has_time = bool(cols) and cols[0].lower() == TIME_COLUMN
+    rest = cols[1:] if has_time else cols
+    stage_col = rest[1] if len(rest) == 2 and rest[1].lower().startswith(STAGE_PREFIX) else None
+    if not (len(rest) == 1 or stage_col is not None):
         raise ValueError(
             f"{path}, line 1: header {_short(header)} has columns {cols}; expected {expected}"
         )
+    xcol = rest[0]
     if not xcol.lower().startswith("x_"):
         raise ValueError(
             f"{path}, line 1: position column {xcol!r} not understood; expected {expected}"
@@ -165,169 +167,33 @@ def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
                 f"{position_unit!r} was given; they must agree"
             )
     px = check_pixel_size(unit, pixel_size_m, where=str(path))
+    _stage_column(path, header)
     return has_time, xcol, unit, px
 
 
-class _RowParser:
-    """Parses the data lines of a CSV block by block (streaming, bounded memory).
-
-    Each block goes through a vectorised fast path (``np.fromstring`` of the whole block,
-    correctly rounded like ``float``) when it is plain ASCII, every line has the expected
-    number of fields, no position cell has an exponent (positions in mm/um/nm get the decimal
-    exponent appended as text, so the scaling stays exact), all values are finite and the time
-    stamps increase. Anything else is parsed line by line by :meth:`_slow`, which reports or
-    excludes the bad rows; both paths give the same float64 bits for the same text.
-    """
-
-    def __init__(self, path, has_time, xcol, unit, on_bad_rows):
-        self.path = path
-        self.has_time = has_time
-        self.ncols = 2 if has_time else 1
-        p = decimal_exponent(unit)
-        self.p_pos = 0 if p is None else p
-        self.colnames = [TIME_COLUMN, xcol] if has_time else [xcol]
-        self.scales = (0, self.p_pos) if has_time else (self.p_pos,)  # t_s is already SI
-        self.suffix = f"e-{self.p_pos}".encode() if self.p_pos else b""
-        self.on_bad_rows = on_bad_rows
-        self.lineno = 2  # line number of the next data line (the header is line 1)
-        self.prev_t, self.prev_line, self.prev_cell = -math.inf, 0, ""
-        self.times: list[np.ndarray] = []
-        self.positions: list[np.ndarray] = []
-        self.excluded: list[tuple[int, str]] = []
-
-    @property
-    def n_lines(self) -> int:
-        return self.lineno - 2
-
-    def feed(self, block: bytes) -> None:
-        n = block.count(b"\n")
-        if not self._fast(block, n):
-            self._slow(block.decode("utf-8").split("\n")[:-1])
-        self.lineno += n
-
-    def result(self):
-        """``(times or None, positions, excluded)``; the per-block parts are released one
-        column at a time, so the peak is the output plus one column."""
-        times = None
-        if self.has_time:
-            times = np.concatenate(self.times) if self.times else np.zeros(0)
-            self.times.clear()
-        pos = np.concatenate(self.positions) if self.positions else np.zeros(0)
-        self.positions.clear()
-        return times, pos, self.excluded
-
-    # -- vectorised path ------------------------------------------------------------------
-    def _fast(self, block: bytes, n: int) -> bool:
-        if not block.isascii() or b"\r" in block:
-            return False
-        if b" \n" in block or b"\t\n" in block:
-            block = _TRAILING_BLANKS.sub(b"\n", block)
-        arr = np.frombuffer(block, dtype=np.uint8)
-        if np.any((arr < 32) & (arr != 10) & (arr != 9)):
-            return False  # control characters: the line-by-line parser reports them
-        nl = np.flatnonzero(arr == 10)
-        if self.ncols == 2:
-            cm = np.flatnonzero(arr == 44)
-            # exactly one comma on every line
-            if cm.size != n or np.any(cm > nl) or np.any(cm[1:] < nl[:-1]):
-                return False
-            ends = np.flatnonzero((arr == 44) | (arr == 10))
-        elif b"," in block:
-            return False
-        else:
-            ends = nl
-        # every cell must hold a non-blank character (np.fromstring reads a blank cell as -1)
-        starts = np.empty_like(ends)
-        starts[0] = 0
-        starts[1:] = ends[:-1] + 1
-        if np.any(starts == ends):
-            return False
-        filled = np.cumsum((arr != 32) & (arr != 9), dtype=np.intp)
-        before = np.where(starts > 0, filled[starts - 1], 0)
-        if np.any(filled[ends - 1] == before):
-            return False
-        if self.suffix:
-            e_at = np.flatnonzero((arr | 32) == 101)  # 'e' or 'E'
-            if e_at.size and (self.ncols == 1 or np.any(e_at > cm[np.searchsorted(nl, e_at)])):
-                return False  # an exponent in a position cell: scaled by the exact slow path
-            text = block.replace(b"\n", self.suffix + b",")
-        else:
-            text = block.replace(b"\n", b",")
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                vals = np.fromstring(text, dtype=np.float64, sep=",")
-        except (ValueError, DeprecationWarning):
-            return False
-        if vals.size != n * self.ncols or not np.all(np.isfinite(vals)):
-            return False
-        vals = vals.reshape(n, self.ncols)
-        if self.has_time:
-            t = vals[:, 0]
-            if not (t[0] > self.prev_t and np.all(t[1:] > t[:-1])):
-                return False
-            last = block[(nl[-2] + 1 if n > 1 else 0) : cm[-1]]
-            self.prev_t, self.prev_line = float(t[-1]), self.lineno + n - 1
-            self.prev_cell = last.decode("ascii").strip()
-            self.times.append(t.copy())
-        self.positions.append(vals[:, -1].copy())
-        return True
-
-    # -- line by line: exact error reports ------------------------------------------------
-    def _slow(self, lines: list[str]) -> None:
-        ncols, colnames = self.ncols, self.colnames
-        times: list[float] = []
-        pos: list[float] = []
-        for lineno, line in enumerate(lines, start=self.lineno):
-            fields = line.split(",")
-            problem = None
-            if len(fields) != ncols:
-                problem = (
-                    f"expected {ncols} field(s) ({','.join(colnames)}), got {len(fields)}: "
-                    f"{_short(line)}"
-                )
-            else:
-                values = []
-                for col, cell, scale_p in zip(colnames, fields, self.scales, strict=True):
-                    v = parse_number(cell, scale_p)
-                    if v is None:
-                        try:
-                            special = float(cell)
-                        except ValueError:
-                            special = None
-                        if special is not None and not math.isfinite(special):
-                            problem = f"non-finite value {cell.strip()!r} (NaN/inf) in column {col}"
-                        else:
-                            problem = f"non-numeric value {_short(cell)} in column {col}"
-                        break
-                    if not math.isfinite(v):
-                        problem = f"value {cell.strip()!r} in column {col} overflows float64"
-                        break
-                    values.append(v)
-                if problem is None and self.has_time and values[0] <= self.prev_t:
-                    problem = (
-                        f"time stamp {TIME_COLUMN} = {fields[0].strip()!r} is not after the "
-                        f"previous one ({self.prev_cell!r}, line {self.prev_line}); time stamps "
-                        "must strictly increase"
-                    )
-            if problem is not None:
-                if self.on_bad_rows == "error":
-                    raise ValueError(f"{self.path}, line {lineno}: {problem}")
-                self.excluded.append((lineno, problem))
-                continue
-            if self.has_time:
-                self.prev_t, self.prev_line, self.prev_cell = values[0], lineno, fields[0].strip()
-                times.append(values[0])
-            pos.append(values[-1])
-        if self.has_time:
-            self.times.append(np.array(times, dtype=np.float64))
-        self.positions.append(np.array(pos, dtype=np.float64))
+def _stage_column(path: Path, header: str) -> tuple[str, str] | None:
+    """``(column name, unit)`` of the stage column of a (valid) header, or None."""
+    stage_col = header.split(",")[-1].strip()
+    if not stage_col.lower().startswith(STAGE_PREFIX):
+        return None
+    try:
+        stage_unit = canonical_unit(stage_col[len(STAGE_PREFIX) :], what="stage unit")
+    except ValueError:
+        stage_unit = None
+    if stage_unit not in _STAGE_UNITS:
+        raise ValueError(
+            f"{path}, line 1: stage column {stage_col!r} must name a length unit: "
+            f"{', '.join(STAGE_PREFIX + u for u in _STAGE_UNITS)} (the stage position is "
+            "converted to metres)"
+        )
+    return stage_col, stage_unit
 
 
 def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
     """Stream ``path``: header checks, then the rows block by block.
 
-    Returns ``(times or None, positions [m], excluded rows, number of data lines, unit)``."""
+    Returns ``(times or None, positions [m or V], stage [m] or None, excluded rows, number of
+    data lines, unit)``."""
     blocks = _line_blocks(path)
     first = next(blocks, None)
     if first is None:
@@ -337,17 +203,18 @@ def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
     cut = first.index(b"\n")
     header = first[:cut].decode("utf-8")
     has_time, xcol, unit, px = _parse_header(path, header, position_unit, pixel_size_m)
-    parser = _RowParser(path, has_time, xcol, unit, on_bad_rows)
+    parser = _RowParser(path, has_time, xcol, unit, on_bad_rows, _stage_column(path, header))
     if cut + 1 < len(first):
         parser.feed(first[cut + 1 :])
     del first
     for block in blocks:
         parser.feed(block)
     times, positions, excluded = parser.result()
+    stage = parser.stage_values
     if decimal_exponent(unit) is None:
         assert px is not None  # check_pixel_size requires a pixel size for 'px'
         positions = positions * px
-    return times, positions, excluded, parser.n_lines, unit
+    return times, positions, stage, excluded, parser.n_lines, unit
 
 
 def infer_frame_interval(times: np.ndarray, tol: float = DEFAULT_TIMING_TOLERANCE) -> float:
@@ -377,7 +244,8 @@ def load_csv(
     timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
     check_units: bool = True,
 ) -> Recording:
-    """Load one recording from a CSV file with header ``t_s,x_<unit>`` (or ``x_<unit>``).
+    """Load one recording from a CSV file with header ``t_s,x_<unit>`` (or ``x_<unit>``),
+    optionally followed by a stage column ``stage_<unit>`` (``Recording.stage``, in metres).
 
     **Arguments:**
 
@@ -388,7 +256,9 @@ def load_csv(
     - `temperature`: [K]; None means 295 K, noted in ``metadata["defaults_applied"]``.
     - `laser_power`: [W] or None.
     - `position_unit`: the unit the file must be in; None takes it from the header. One of
-      m, mm, um (µm), nm, px (needs `pixel_size_m` [m]).
+      m, mm, um (µm), nm, px (needs `pixel_size_m` [m]), or V (a detector signal in volts,
+      kept in volts: ``Recording.position_unit == "V"``). A header that names another unit
+      is an error.
     - `on_bad_rows`: ``"error"`` (default) raises at the first bad row; ``"exclude"`` drops
       bad rows, records ``{"count", "lines", "reasons"}`` in ``metadata["excluded_rows"]``
       and warns with :class:`ExcludedRowsWarning`.
@@ -400,7 +270,7 @@ def load_csv(
     path = Path(os.fspath(path))
     if on_bad_rows not in _ON_BAD_ROWS:
         raise ValueError(f"on_bad_rows must be one of {_ON_BAD_ROWS}; got {on_bad_rows!r}")
-    times, positions, excluded, n_data, unit = _read_csv(
+    times, positions, stage, excluded, n_data, unit = _read_csv(
         path, position_unit, pixel_size_m, on_bad_rows
     )
     if positions.shape[0] == 0:
@@ -450,6 +320,7 @@ def load_csv(
             allow_irregular=allow_irregular,
             timing_tolerance=timing_tolerance,
             check_units=check_units,
+            stage=stage,
         )
     except ValueError as e:
         extra = (
@@ -477,9 +348,17 @@ def load_csv(
 
 
 def write_csv(recording: Recording, path, position_unit: str = "nm", pixel_size_m=None) -> None:
-    """Write ``t_s,x_<unit>`` with exact decimal text (a reload gives the same float64 bits
-    for m/mm/um/nm). Recordings without time stamps get ``t_s = i * frame_interval``."""
+    """Write ``t_s,x_<unit>`` (and ``stage_nm`` when the recording has a stage) with exact
+    decimal text (a reload gives the same float64 bits for m/mm/um/nm/V). Recordings without
+    time stamps get ``t_s = i * frame_interval``. A recording in volts is written in ``V``
+    only, one in metres in a length unit only."""
     unit = canonical_unit(position_unit)
+    if (unit == "V") != (recording.position_unit == "V"):
+        raise ValueError(
+            f"position_unit = {position_unit!r} but the recording's positions are in "
+            f"{'volts' if recording.position_unit == 'V' else 'metres'}: write "
+            f"{'volts as V' if recording.position_unit == 'V' else 'metres in a length unit'}"
+        )
     px = check_pixel_size(unit, pixel_size_m)
     p = decimal_exponent(unit)
     pos = recording.positions
@@ -490,6 +369,13 @@ def write_csv(recording: Recording, path, position_unit: str = "nm", pixel_size_
     t = recording.times
     if t is None:
         t = np.arange(recording.n_frames, dtype=np.float64) * recording.frame_interval
-    rows = [f"{TIME_COLUMN},x_{unit}"]
+    header = f"{TIME_COLUMN},x_{unit}"
+    if recording.stage is not None:
+        header += f",{STAGE_PREFIX}nm"
+        cells = [
+            f"{x},{format_scaled(z, 9)}"
+            for x, z in zip(cells, recording.stage.tolist(), strict=True)
+        ]
+    rows = [header]
     rows.extend(f"{ti!r},{x}" for ti, x in zip(t.tolist(), cells, strict=True))
     Path(os.fspath(path)).write_text("\n".join(rows) + "\n", encoding="utf-8", newline="\n")

@@ -6,7 +6,10 @@
                  "temperature_K": 295.0, "laser_power_mW": 100.0}]}
 ```
 Files are relative to the manifest. Numbers are read as exact decimals, so the mW -> W
-conversion and the saved/loaded values are bit-exact.
+conversion and the saved/loaded values are bit-exact. The instrument keys
+(:data:`INSTRUMENT_KEYS`: ``detector``, ``bead_radius_m``, ``drive``, ...) may be given per
+recording or at the top level as the default for every recording; they are validated and
+stored in the recording's metadata under the same names (see :func:`instrument_settings`).
 """
 
 from __future__ import annotations
@@ -20,11 +23,19 @@ from typing import Any
 
 from .._constants import DEFAULT_TEMPERATURE
 from ._csv import load_csv, write_csv
+from ._instrument import INSTRUMENT_KEYS, check_instrument
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
 from ._recording_set import RecordingSet
 from ._units import canonical_unit, check_pixel_size, decimal_text
 
-_TOP_KEYS = ("position_unit", "pixel_size_m", "recordings", "description", "allow_irregular")
+_TOP_KEYS = (
+    "position_unit",
+    "pixel_size_m",
+    "recordings",
+    "description",
+    "allow_irregular",
+    *INSTRUMENT_KEYS,
+)
 _ENTRY_KEYS = (
     "file",
     "frame_interval_s",
@@ -36,6 +47,7 @@ _ENTRY_KEYS = (
     "allow_irregular",
     "timing_tolerance",
     "check_units",
+    *INSTRUMENT_KEYS,
 )
 # metadata keys that the loaders set themselves; not written back by save_manifest
 _LOADER_KEYS = ("source", "excluded_rows", "defaults_applied", "position_unit")
@@ -86,10 +98,23 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
     from the CSV time stamps), ``temperature_K`` (else 295 K, noted in
     ``metadata["defaults_applied"]``), ``laser_power_mW``, ``name`` (default: file stem),
     ``metadata``, ``allow_irregular`` (keep irregular time stamps; their jitter is reported
-    in ``timing_jitter``), ``timing_tolerance``, ``check_units``. Top level:
-    ``position_unit`` (required), ``pixel_size_m`` (for ``px`` only), ``recordings``,
-    ``description`` (a string), ``allow_irregular`` (the default for entries that do not
-    set it). Unknown keys are errors (so ``exposure_ms`` cannot be ignored).
+    in ``timing_jitter``), ``timing_tolerance``, ``check_units``, and the instrument keys
+    (below). Top level: ``position_unit`` (required; ``"V"`` for a detector signal in volts),
+    ``pixel_size_m`` (for ``px`` only), ``recordings``, ``description`` (a string),
+    ``allow_irregular`` and the instrument keys (defaults for the entries that do not set
+    them; an entry's ``null`` removes a default). Unknown keys are errors (so ``exposure_ms``
+    cannot be ignored).
+
+    Instrument keys (all optional; stored in ``metadata`` under the same names, read by
+    :func:`instrument_settings`): ``detector`` (``"camera"`` | ``"photodiode"``),
+    ``anti_aliasing`` (bool, photodiode only), ``diode_filter`` (``"fit"`` | ``"none"`` |
+    ``{"alpha": a, "f3db_Hz": f}``, photodiode only unless ``"none"``), ``bead_radius_m``
+    (< 1e-3), ``viscosity_Pa_s``, ``distance_to_surface_m`` (> the radius),
+    ``bead_density_kg_per_m3``, ``fluid_density_kg_per_m3``, ``friction`` (``"free"`` |
+    ``"stokes"``, which needs ``bead_radius_m``), ``drive`` (``{"frequency_Hz": f}``; the
+    CSV then needs a ``stage_nm`` column), ``fit_range_Hz`` (``[fmin, fmax]``),
+    ``excluded_ranges_Hz`` (``[[a, b], ...]``). They may also be given inside an entry's
+    ``metadata`` object, but not in both places.
 
     **Raises:** ``ValueError`` naming the manifest, the entry and the problem;
     ``FileNotFoundError`` for a missing CSV.
@@ -137,8 +162,9 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         px = check_pixel_size(unit, px_given)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
-    # manifest-level default for the entries that do not set it themselves
+    # manifest-level defaults for the entries that do not set them themselves
     irregular_default = _flag(str(path), "allow_irregular", doc.get("allow_irregular", False))
+    top_instrument = {k: _plain(doc[k]) for k in INSTRUMENT_KEYS if k in doc}
     entries = doc.get("recordings")
     if not isinstance(entries, list) or not entries:
         raise ValueError(f"{path}: 'recordings' must be a non-empty list of entries")
@@ -181,6 +207,19 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         if not isinstance(meta, dict):
             raise ValueError(f"{where}: 'metadata' must be a JSON object; got {meta!r}")
         meta = _plain(meta)
+        twice = sorted(k for k in INSTRUMENT_KEYS if k in e and k in meta)
+        if twice:
+            raise ValueError(
+                f"{where}: {twice} given both as entry key(s) and in 'metadata'; give each once"
+            )
+        inherited = sorted(k for k in top_instrument if k not in e and k not in meta)
+        instrument = {k: top_instrument[k] for k in inherited}
+        instrument.update({k: _plain(e[k]) for k in INSTRUMENT_KEYS if k in e})
+        instrument.update({k: meta[k] for k in INSTRUMENT_KEYS if k in meta})
+        where_i = where + (f", with the top-level default(s) {inherited}" if inherited else "")
+        nyquist = 0.5 / kw["frame_interval"] if kw.get("frame_interval", 0) > 0 else None
+        units_checked = e.get("check_units", True) is not False
+        meta.update(check_instrument(instrument, where_i, nyquist=nyquist, check_units=units_checked))
         meta["manifest"] = str(path)
         if defaults:
             meta["defaults_applied"] = defaults
@@ -193,19 +232,26 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
             where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))
         )
         try:
-            recs.append(
-                load_csv(
-                    csv_path,
-                    position_unit=unit,
-                    pixel_size_m=px,
-                    on_bad_rows=on_bad_rows,
-                    name=name,
-                    metadata=meta,
-                    **kw,
-                )
+            rec = load_csv(
+                csv_path,
+                position_unit=unit,
+                pixel_size_m=px,
+                on_bad_rows=on_bad_rows,
+                name=name,
+                metadata=meta,
+                **kw,
             )
         except ValueError as err:
             raise ValueError(f"{path}, recordings[{i}]: {err}") from None
+        # what needs the data: the stage column of a drive, the Nyquist frequency
+        check_instrument(
+            instrument,
+            where_i,
+            has_stage=rec.stage is not None,
+            nyquist=0.5 / rec.frame_interval,
+            check_units=units_checked,
+        )
+        recs.append(rec)
     return RecordingSet(recs)
 
 
@@ -219,11 +265,16 @@ def _safe_stem(name: str | None, i: int) -> str:
 def save_manifest(
     recordings: Recording | RecordingSet,
     path,
-    position_unit: str = "nm",
+    position_unit: str | None = None,
     *,
     pixel_size_m=None,
 ) -> list[Path]:
     """Write a manifest JSON at ``path`` and one CSV per recording next to it.
+
+    `position_unit`: the unit of the CSV files' positions; None (default): ``"V"`` for
+    recordings in volts, else ``"nm"`` (a manifest has one unit: volts and metres cannot be
+    mixed). The instrument keys of the metadata are written as entry keys and a recording's
+    stage as a ``stage_nm`` column.
 
     CSV names come from the recording names (made file-system safe and unique), else
     ``recording_000.csv``, ... Positions are written as exact decimals in `position_unit`
@@ -236,7 +287,21 @@ def save_manifest(
         recordings = RecordingSet([recordings])
     if not isinstance(recordings, RecordingSet):
         recordings = RecordingSet(recordings)
+    in_volts = {r.position_unit == "V" for r in recordings}
+    if len(in_volts) > 1:
+        raise ValueError(
+            "save_manifest: some recordings are in volts and others in metres; a manifest has "
+            "one position_unit: save them in two manifests"
+        )
+    if position_unit is None:
+        position_unit = "V" if in_volts == {True} else "nm"
     unit = canonical_unit(position_unit)
+    if (unit == "V") != (in_volts == {True}):
+        raise ValueError(
+            f"save_manifest: position_unit = {position_unit!r} but the recordings are in "
+            f"{'volts' if in_volts == {True} else 'metres'}; pass "
+            f"{'V' if in_volts == {True} else 'a length unit (nm, um, m, ...)'} or None"
+        )
     px = check_pixel_size(unit, pixel_size_m)
     path = Path(os.fspath(path))
     folder = path.parent
@@ -266,7 +331,11 @@ def save_manifest(
         entry["name"] = r.name
         plain = thaw(r.metadata)
         assert isinstance(plain, dict)  # thaw maps a mapping to a dict
-        meta = {k: v for k, v in plain.items() if k not in _LOADER_KEYS + ("manifest",)}
+        for k in INSTRUMENT_KEYS:
+            if plain.get(k) is not None:
+                entry[k] = plain[k]
+        skip = (*_LOADER_KEYS, "manifest", *INSTRUMENT_KEYS)
+        meta = {k: v for k, v in plain.items() if k not in skip}
         if meta:
             entry["metadata"] = meta
         if r.allow_irregular:

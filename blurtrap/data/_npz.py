@@ -1,7 +1,8 @@
 """NPZ storage: bit-exact arrays plus a JSON header with the scalar fields and metadata.
 
 Layout: ``__blurtrap__`` (a 0-d unicode array holding JSON), ``positions_<i>`` and, where
-present, ``times_<i>``. No pickles are written or read.
+present, ``times_<i>`` and ``stage_<i>``. No pickles are written or read. The unit of the
+positions (metres, or volts) is in the metadata (``position_unit``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ def save_npz(recordings: Recording | RecordingSet, path, *, compress: bool = Fal
         arrays[f"positions_{i}"] = np.asarray(r.positions)
         if r.times is not None:
             arrays[f"times_{i}"] = np.asarray(r.times)
+        if r.stage is not None:
+            arrays[f"stage_{i}"] = np.asarray(r.stage)
         entries.append(
             {
                 "frame_interval": r.frame_interval,
@@ -54,12 +57,13 @@ def save_npz(recordings: Recording | RecordingSet, path, *, compress: bool = Fal
                 "timing_tolerance": r.timing_tolerance,
                 "check_units": r.check_units,
                 "has_times": r.times is not None,
+                "has_stage": r.stage is not None,
             }
         )
     header = {"format": _FORMAT, "version": _VERSION, "kind": kind, "recordings": entries}
     arrays[_HEADER_KEY] = np.array(json.dumps(header))
     with open(os.fspath(path), "wb") as f:
-        # the array names (positions_<i>, times_<i>, __blurtrap__) never collide with allow_pickle
+        # the array names (positions_<i>, ..., __blurtrap__) never collide with allow_pickle
         (np.savez_compressed if compress else np.savez)(f, **arrays)  # pyright: ignore[reportArgumentType]
 
 
@@ -175,13 +179,15 @@ def _from_blurtrap(data):
         missing = [k for k in _ENTRY_KEYS if k not in e]
         if missing:
             raise ValueError(f"corrupt {_HEADER_KEY} header: recordings[{i}] lacks {missing}")
-        for flag in ("has_times", "allow_irregular", "check_units"):
+        e.setdefault("has_stage", False)  # files written before stages were stored
+        for flag in ("has_times", "has_stage", "allow_irregular", "check_units"):
             if not isinstance(e[flag], bool):
                 raise ValueError(
                     f"corrupt {_HEADER_KEY} header: recordings[{i}].{flag} = {e[flag]!r} is not "
                     "true/false"
                 )
         needed = [f"positions_{i}"] + ([f"times_{i}"] if e["has_times"] else [])
+        needed += [f"stage_{i}"] if e["has_stage"] else []
         absent = [a for a in needed if a not in data]
         if absent:
             raise ValueError(f"array(s) {absent} missing (named in the {_HEADER_KEY} header)")
@@ -199,6 +205,7 @@ def _from_blurtrap(data):
                     allow_irregular=e["allow_irregular"],
                     timing_tolerance=e["timing_tolerance"],
                     check_units=e["check_units"],
+                    stage=data[f"stage_{i}"] if e["has_stage"] else None,
                 )
             )
         except ValueError as err:

@@ -72,13 +72,26 @@ def _unit_property(props, position_unit, where: str):
     return text.strip()
 
 
+def _file_unit(props) -> str | None:
+    """The unit named by the channel's ``unit_string`` property (volts or a length), or None."""
+    text = props.get("unit_string")
+    if not isinstance(text, str):
+        return None
+    if _is_volts(text):
+        return "V"
+    try:
+        return canonical_unit(text)
+    except ValueError:
+        return None
+
+
 def load_tdms(
     path,
     group: str | None = None,
     channel: str | None = None,
     *,
     sample_rate=None,
-    position_unit: str = "nm",
+    position_unit: str | None = None,
     exposure=None,
     displacement_sensitivity_m_per_V=None,
     **recording_kwargs,
@@ -91,9 +104,10 @@ def load_tdms(
       file has only one).
     - `sample_rate` [Hz]: default ``1 / wf_increment``, the waveform's sample interval stored
       as a channel property by LabVIEW; a `sample_rate` that disagrees with it is an error.
-    - `position_unit`: m, mm, um (µm), nm, px (with ``pixel_size_m``), or ``"V"`` with
-      `displacement_sensitivity_m_per_V` [m/V]. Checked against the channel's
-      ``unit_string`` property when that names a unit.
+    - `position_unit`: m, mm, um (µm), nm, px (with ``pixel_size_m``), or ``"V"`` (kept in
+      volts, or converted with `displacement_sensitivity_m_per_V` [m/V]). Checked against the
+      channel's ``unit_string`` property when that names a unit; None (default): that unit,
+      else nm.
     - `exposure` [s]: required.
     - the remaining keywords are passed to :class:`Recording`.
 
@@ -118,6 +132,8 @@ def load_tdms(
     if values.ndim != 1:
         raise ValueError(f"{where}: the channel has shape {values.shape}; expected a 1-D trace")
     meta: dict = {"source": str(path), "group": gname, "channel": cname}
+    if position_unit is None:
+        position_unit = _file_unit(props) or "nm"
     unit_text = _unit_property(props, position_unit, where)
     if unit_text is not None:
         meta["unit_string"] = unit_text

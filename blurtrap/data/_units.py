@@ -4,7 +4,10 @@ Power-of-ten units (m, mm, um, nm) are converted *in decimal* before rounding to
 the text ``"12.345"`` in nm becomes ``float("12.345e-9")``, the float64 nearest to the exact
 value. Writing uses the shortest repr of the value in metres shifted by the same power of ten,
 so save -> load reproduces every float64 bit for bit. Pixels (``px``) are multiplied by
-``pixel_size_m`` (one rounding; exact round trips are not guaranteed for ``px``).
+``pixel_size_m`` (one rounding; exact round trips are not guaranteed for ``px``). Volts
+(``V``, a position detector's signal before its displacement sensitivity is known) are not
+a length: they are kept as they are (exponent 0), and a :class:`Recording` in volts says so
+in ``position_unit``.
 """
 
 from __future__ import annotations
@@ -16,9 +19,20 @@ from decimal import Decimal
 import numpy as np
 
 # canonical unit -> decimal exponent p such that 1 unit = 10**-p m (None: needs pixel_size_m)
-_DECIMAL_EXPONENT = {"m": 0, "mm": 3, "um": 6, "nm": 9, "px": None}
-_ALIASES = {"µm": "um", "μm": "um", "micron": "um", "microns": "um"}
-ALLOWED_UNITS = ("m", "mm", "um", "µm", "nm", "px")
+# ("V" is not a length: its values are kept in volts)
+_DECIMAL_EXPONENT = {"m": 0, "mm": 3, "um": 6, "nm": 9, "px": None, "V": 0}
+_ALIASES = {
+    "µm": "um",
+    "μm": "um",
+    "micron": "um",
+    "microns": "um",
+    "v": "V",
+    "volt": "V",
+    "volts": "V",
+}
+ALLOWED_UNITS = ("m", "mm", "um", "µm", "nm", "px", "V")
+#: the units of length (all but volts)
+LENGTH_UNITS = ("m", "mm", "um", "nm", "px")
 
 # A plain decimal number: sign, mantissa, optional exponent (no '_', no hex, no nan/inf).
 _NUMBER = re.compile(r"\s*([+-]?)(\d+(?:\.\d*)?|\.\d+)(?:[eE]([+-]?\d+))?\s*\Z")
@@ -28,12 +42,13 @@ def canonical_unit(unit, *, what: str = "position_unit") -> str:
     """Return the canonical spelling of a position unit, or raise listing the allowed ones."""
     if isinstance(unit, str):
         u = unit.strip()
-        u = _ALIASES.get(u, u)
+        u = _ALIASES.get(u, _ALIASES.get(u.lower(), u))
         if u in _DECIMAL_EXPONENT:
             return u
     raise ValueError(
         f"{what} = {unit!r} is not a supported position unit; expected one of "
-        f"{', '.join(repr(u) for u in ALLOWED_UNITS)} ('px' also needs pixel_size_m)"
+        f"{', '.join(repr(u) for u in ALLOWED_UNITS)} ('px' also needs pixel_size_m; 'V' is "
+        "a detector signal in volts)"
     )
 
 
@@ -73,7 +88,7 @@ def _positive_scalar(value, pre: str) -> float:
 
 
 def to_metres(values, unit: str, pixel_size_m: float | None = None) -> np.ndarray:
-    """Convert a numeric array in ``unit`` to float64 metres (a new array)."""
+    """Convert a numeric array in ``unit`` to float64 metres (a new array; volts stay volts)."""
     arr = np.array(values, dtype=np.float64, copy=True)
     p = _DECIMAL_EXPONENT[unit]
     if p is None:

@@ -1,11 +1,21 @@
 """Brownian dynamics of a bead in an optical trap with in-loop exposure averaging.
 
 ``simulate`` is the entry point; injections (tracking noise, drift, timing jitter, photodiode
-filter, hydrodynamic friction), exposure
-profiles and forces are small composable pieces passed to it. Imports only
+filter, hydrodynamic friction, stage drive, volts sensitivity), exposure
+profiles and forces are small composable pieces passed to it. ``simulate_photodiode`` is the
+oversampling, anti-aliasing photodiode instrument. Imports only
 ``blurtrap.physics``.
 """
 
+from ._antialias import (
+    antialias_gain as antialias_gain,
+)
+from ._antialias import (
+    antialias_taps as antialias_taps,
+)
+from ._antialias import (
+    simulate_photodiode as simulate_photodiode,
+)
 from ._injections import (
     AbstractInjection as AbstractInjection,
 )
@@ -26,6 +36,15 @@ from ._injections import (
 )
 from ._injections import (
     TrackingNoise as TrackingNoise,
+)
+from ._instruments import (
+    Sensitivity as Sensitivity,
+)
+from ._instruments import (
+    StageDrive as StageDrive,
+)
+from ._instruments import (
+    stage_positions as stage_positions,
 )
 from ._profiles import (
     ExponentialProfile as ExponentialProfile,

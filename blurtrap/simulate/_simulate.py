@@ -25,6 +25,7 @@ from ._injections import (
     PhotodiodeFilter,
     TimingJitter,
 )
+from ._instruments import Sensitivity, StageDrive, check_drives, drive_frames
 from ._linear import simulate_photodiode
 from ._spectral import simulate_spectral
 
@@ -328,8 +329,11 @@ def simulate(
       ``injections=(TrackingNoise(eps),)`` but broadcast over the grid.
     - `injections`: tuple of :class:`AbstractInjection` (applied after the scan, in order, each
       with its own key), at most one :class:`TimingJitter` (applied in the loop), at most one
-      :class:`PhotodiodeFilter` (``"exact_frames"`` or ``"spectral"``) and at most one
-      :class:`HydrodynamicFriction` (``"spectral"``).
+      :class:`PhotodiodeFilter` (``"exact_frames"`` or ``"spectral"``), at most one
+      :class:`HydrodynamicFriction` (``"spectral"``), any number of :class:`StageDrive`
+      (sinusoidal stage drive: its exact response, blurred over the exposure, is added to the
+      frames; ``mode="fluid"`` or ``"additive"``, see ``blurtrap.simulate._instruments``) and
+      at most one :class:`Sensitivity` (applied last: the output is then in volts).
     - `exposure_profile`: callable ``p(u)``, ``u = t/W`` in [0, 1], weighting the exposure
       (e.g. :class:`TrapezoidProfile`, :class:`ExponentialProfile`); substep methods and a
       single window only.
@@ -411,14 +415,18 @@ def simulate(
     jitters = [inj for inj in injections if isinstance(inj, TimingJitter)]
     diodes = [inj for inj in injections if isinstance(inj, PhotodiodeFilter)]
     hydros = [inj for inj in injections if isinstance(inj, HydrodynamicFriction)]
+    drives = [inj for inj in injections if isinstance(inj, StageDrive)]
+    sens = [inj for inj in injections if isinstance(inj, Sensitivity)]
     additive = [inj for inj in injections
-                if not isinstance(inj, (TimingJitter, PhotodiodeFilter, HydrodynamicFriction))]
+                if not isinstance(inj, (TimingJitter, PhotodiodeFilter, HydrodynamicFriction,
+                                        StageDrive, Sensitivity))]
     for inj in additive:
         if not isinstance(inj, AbstractInjection):
             raise ValueError(
-                "injections must be AbstractInjection, TimingJitter, PhotodiodeFilter or "
-                f"HydrodynamicFriction objects; got {inj!r}"
+                "injections must be AbstractInjection, TimingJitter, PhotodiodeFilter, "
+                f"HydrodynamicFriction, StageDrive or Sensitivity objects; got {inj!r}"
             )
+    check_drives(drives, sens, hydros[0] if hydros else None, force, exposure_profile)
     for name, found in (("TimingJitter", jitters), ("PhotodiodeFilter", diodes),
                         ("HydrodynamicFriction", hydros)):
         if len(found) > 1:
@@ -671,6 +679,12 @@ def simulate(
 
         pos = jax.vmap(inject)(pos, times, k_inj, epsj)
 
+    if drives:  # exact steady-state response, blurred over each exposure (_instruments)
+        widths = np.broadcast_to(wins[None, :], (G, n_win)) if windows else wf[:, None]
+        pos = pos.reshape(G, n_win, n_traces, n_frames) + drive_frames(
+            drives, kf, gf, widths, dtf, n_frames, times if jitter else None, photodiode, dtype)
+    if sens:
+        pos = pos / sens[0].rd.astype(dtype)
     if pos.shape != out_shape:
         pos = pos.reshape(out_shape)
     if return_times:
