@@ -53,18 +53,25 @@ class Plan:
 
 
 def _settings(rec) -> dict:
-    try:  # TEMP until the data layer lands
-        from ..data import instrument_settings
-    except ImportError:
-        keys = ("detector", "anti_aliasing", "diode_filter", "bead_radius_m", "viscosity_Pa_s",
-                "distance_to_surface_m", "friction", "drive", "fit_range_Hz",
-                "excluded_ranges_Hz")
-        m = dict(rec.metadata)
-        out = {key: m.get(key) for key in keys}
-        out["anti_aliasing"] = bool(out["anti_aliasing"])
-        out["friction"] = out["friction"] or "free"
-        return out
+    from ..data import instrument_settings
+
     return instrument_settings(rec)
+
+
+#: optional metadata keys: standard errors of the Stokes inputs, propagated into the errors
+INPUT_ERRORS = ("bead_radius_err_m", "viscosity_err_Pa_s", "temperature_err_K")
+
+
+def _input_errors(rec, i) -> list:
+    out = []
+    for key in INPUT_ERRORS:
+        v = rec.metadata.get(key)
+        if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool)
+                                  and math.isfinite(v) and v >= 0):
+            raise ValueError(f"recording {i}: {key} must be a standard error >= 0 (SI); "
+                             f"got {v!r}")
+        out.append(None if v is None else float(v))
+    return out
 
 
 def _same(values, what):
@@ -122,8 +129,7 @@ def _stokes_gamma(recs, sts):
         eta0 = st["viscosity_Pa_s"]
         g = gamma_of(rad, eta0, temp)
         var = 0.0
-        for err, which in ((st.get("bead_radius_err_m"), 0), (st.get("viscosity_err_Pa_s"), 1),
-                           (st.get("temperature_err_K"), 2)):
+        for which, err in enumerate(_input_errors(r, i)):
             if not err or (which == 1 and eta0 is None) or (which == 2 and eta0 is not None):
                 continue
             args = [rad, eta0, temp]
