@@ -57,7 +57,7 @@ def kaiser_lowpass(oversample, cutoff=0.45, transition=0.1, attenuation_db=100.0
     """Symmetric, unit-DC-gain Kaiser-windowed sinc taps at the fast rate (cut-off and
     transition in units of the output rate); Kaiser's formulas for beta and the length."""
     beta = 0.1102 * (attenuation_db - 8.7)
-    n = int(math.ceil((attenuation_db - 7.95) / (2.285 * 2 * np.pi * transition / oversample)))
+    n = int(math.ceil((attenuation_db - 7.95) / (2.285 * 2 * np.pi * transition / oversample))) + 1
     half = n // 2 + 1
     j = np.arange(-half, half + 1)
     taps = np.sinc(2 * cutoff / oversample * j) * np.kaiser(2 * half + 1, beta)

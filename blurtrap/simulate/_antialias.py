@@ -149,7 +149,7 @@ def simulate_photodiode(
     **Raises:** ``ValueError`` for a bad filter, :class:`TimingJitter`, or the arguments
     :func:`simulate` refuses. Cost: ``M`` exact fast frames plus an FFT per output frame.
     """
-    from ._simulate import simulate
+    from ._simulate import _as_keys, simulate
 
     h = antialias_taps(oversample, cutoff, transition, attenuation_db)
     half = h.size // 2
@@ -161,11 +161,30 @@ def simulate_photodiode(
     dt = float(frame_interval)
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"frame_interval must be finite and > 0 s; got {frame_interval!r} s")
+    h_fast = dt / oversample
+    fast, slow, sens = _split(injections, half * h_fast)  # the fast record starts at -K h_fast
+    method = "spectral" if any(isinstance(i, HydrodynamicFriction) for i in fast) else "exact_frames"
+    n_fast = (n_frames - 1) * oversample + 1 + 2 * half
+    eps = np.asarray(tracking_std, dtype=np.float64)
+    if np.any(~np.isfinite(eps) | (eps < 0)):
+        raise ValueError(f"tracking_std must be finite and >= 0 m; got {tracking_std!r} m")
+    key = _as_keys(key)
+    if key.ndim:
+        raise ValueError(f"simulate_photodiode takes a single PRNG key; got keys of shape {key.shape}")
+    k_sim, k_out = jr.split(key)
+    x = simulate(k, gamma, _INSTANT * h_fast, h_fast, n_fast, key=k_sim, temperature=temperature,
+                 n_traces=n_traces, method=method, injections=tuple(fast), dtype=dtype)
+    y = _fir_decimate(x, h, oversample, n_frames)
+    return _output_rate(y, k_out, eps, slow, sens, dt)
+
+
+def _split(injections, lead):
+    """(fast, slow, sensitivity) injections: those acting on the continuous signal run at the
+    fast rate (a drive's phase moved to the fast record's start, ``-lead`` [s]), the additive
+    ones and the volts at the output rate."""
     if any(isinstance(i, TimingJitter) for i in injections):
         raise ValueError("simulate_photodiode does not support TimingJitter (regular samples)")
     fast_types = (PhotodiodeFilter, HydrodynamicFriction, StageDrive)
-    h_fast = dt / oversample
-    lead = half * h_fast  # the fast record starts at t = -lead
     fast = []
     for inj in injections:
         if isinstance(inj, StageDrive):
@@ -180,23 +199,21 @@ def simulate_photodiode(
     for inj in slow:
         if not isinstance(inj, AbstractInjection):
             raise ValueError(f"unsupported injection for simulate_photodiode: {inj!r}")
-    method = "spectral" if any(isinstance(i, HydrodynamicFriction) for i in fast) else "exact_frames"
-    n_fast = (n_frames - 1) * oversample + 1 + 2 * half
-    k_sim, k_out = jr.split(key)
-    x = simulate(k, gamma, _INSTANT * h_fast, h_fast, n_fast, key=k_sim, temperature=temperature,
-                 n_traces=n_traces, method=method, injections=tuple(fast),
-                 dtype=dtype)
-    y = _fir_decimate(x, h, oversample, n_frames)
-    grid = y.shape[:-2]
-    eps = np.broadcast_to(np.asarray(tracking_std, dtype=np.float64), grid)
-    if np.any(~np.isfinite(eps) | (eps < 0)):
-        raise ValueError(f"tracking_std must be finite and >= 0 m; got {tracking_std!r} m")
-    keys = jr.split(k_out, len(slow) + 1)
+    return fast, slow, sens
+
+
+def _output_rate(y, key, eps, slow, sens, dt):
+    """Tracking noise (grid-broadcast std [m]), the additive injections at ``t_n = n dt`` (each
+    grid point with its own key) and the volts scaling, on the decimated frames."""
+    grid = np.broadcast_shapes(y.shape[:-2], eps.shape)
+    y = jnp.broadcast_to(y, grid + y.shape[-2:])
+    keys = jr.split(key, len(slow) + 1)
     if eps.any():
-        y = y + jnp.asarray(eps, y.dtype)[..., None, None] * jr.normal(keys[0], y.shape, y.dtype)
+        std = jnp.asarray(np.broadcast_to(eps, grid), y.dtype)[..., None, None]
+        y = y + std * jr.normal(keys[0], y.shape, y.dtype)
     if slow:
         g_n = int(np.prod(grid, dtype=np.int64))
-        times = jnp.asarray(np.arange(n_frames) * dt, y.dtype)
+        times = jnp.asarray(np.arange(y.shape[-1]) * dt, y.dtype)
         yg = y.reshape((g_n,) + y.shape[-2:])
         for i, inj in enumerate(slow):
             ks = jr.split(keys[i + 1], g_n)

@@ -150,17 +150,25 @@ def lorentzian(f):
     return 2 * SIGMA2 * tau / (1 + (2 * np.pi * f * tau) ** 2)
 
 
-def test_antialiased_photodiode_psd_and_variance():
-    """Averaged periodograms below 0.4 fs equal the unblurred, unaliased Lorentzian plus the
-    floor eps2 dt (the folded or blurred spectra differ by 50 % and 20 % near 0.4 fs); the
-    output variance is the integral of the filtered Lorentzian plus eps2."""
-    n, n_tr, eps, m = 4096, 32, 5e-9, 16
+@pytest.mark.parametrize("pd, m", [(None, 16), ((500.0, 0.3), 8)])
+def test_antialiased_photodiode_psd_and_variance(pd, m):
+    """Averaged periodograms below 0.4 fs equal the unblurred, unaliased Lorentzian (times the
+    diode's |H_pd|^2) plus the floor eps2 dt (the folded or blurred spectra differ by 50 % and
+    20 % near 0.4 fs); the output variance is the integral of the filtered PSD plus eps2."""
+    n, n_tr, eps = 4096, 32, 5e-9
+    inj = (PhotodiodeFilter(*pd),) if pd else ()
+
+    def psd(f):
+        if pd is None:
+            return lorentzian(f)
+        return lorentzian(f) * (pd[1] ** 2 + (1 - pd[1] ** 2) / (1 + (f / pd[0]) ** 2))
+
     x = np.asarray(simulate_photodiode(K, GAMMA, DT, n, key=jax.random.key(21), n_traces=n_tr,
-                                       oversample=m, tracking_std=eps))
+                                       oversample=m, tracking_std=eps, injections=inj))
     per = np.abs(np.fft.rfft(x - x.mean(axis=1, keepdims=True), axis=1)) ** 2 * DT / n
     f = np.fft.rfftfreq(n, DT)
     band = (f > 0) & (f < 0.4 / DT)
-    ratio = per[:, band] / (lorentzian(f[band]) + eps**2 * DT)
+    ratio = per[:, band] / (psd(f[band]) + eps**2 * DT)
     nb = 32  # bins per block: each block mean has relative SE 1/sqrt(n_tr nb) (Gamma law)
     blocks = ratio[:, : ratio.shape[1] // nb * nb].reshape(n_tr, -1, nb).mean(axis=(0, 2))
     z = (blocks - 1) * np.sqrt(n_tr * nb)
@@ -176,7 +184,7 @@ def test_antialiased_photodiode_psd_and_variance():
     j = np.arange(h.size) - h.size // 2
     gain = np.cos(2 * np.pi * ff[:, None] * DT / m * j) @ h
     np.testing.assert_allclose(gain[::100], antialias_gain(ff[::100], DT, m), atol=1e-9)
-    expect = 2 * np.trapezoid(lorentzian(ff) * gain**2, ff) + eps**2
+    expect = 2 * np.trapezoid(psd(ff) * gain**2, ff) + eps**2
     check_mean(x.var(axis=1) * n / (n - 1), expect, "output variance")
 
 
