@@ -320,8 +320,9 @@ def load_bluelake(
 
     - `channel`: ``"group/name"`` of the dataset.
     - `position_unit`: the unit of the signal. ``"V"`` (default) converts with
-      `displacement_sensitivity_m_per_V` [m/V] (required unless blurtrap recordings accept
-      volts); a length unit (m, mm, um, nm) takes the values as positions.
+      `displacement_sensitivity_m_per_V` [m/V] when given, else keeps the signal in volts
+      (``Recording.position_unit == "V"``); a length unit (m, mm, um, nm) takes the values as
+      positions.
     - `force_sensitivity_pN_per_V`, `force_offset_pN`: Bluelake stores the ``Force ...``
       channels in pN, already calibrated with Bluelake's own calibration (the file's
       ``Calibration`` group holds ``Rf (pN/V)`` and ``Offset (pN)``). Recalibrating needs the
