@@ -48,7 +48,8 @@ def from_arrays(
 
     - `positions`: 1-D (one recording -> :class:`Recording`) or 2-D (rows are recordings ->
       :class:`RecordingSet`), in `position_unit` (m, mm, um/µm, nm, or px with
-      `pixel_size_m` [m]); converted to float64 metres.
+      `pixel_size_m` [m]); converted to float64 metres. ``"V"``: a detector signal in volts,
+      kept in volts (``Recording.position_unit == "V"``).
     - `frame_interval`, `exposure` [s], `temperature` [K], `laser_power` [W] (NaN or None:
       unknown): scalars, or one value per row for 2-D input.
     - `times` [s]: None, 1-D (shared by all rows) or 2-D (one row per recording).

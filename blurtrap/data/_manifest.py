@@ -15,6 +15,7 @@ stored in the recording's metadata under the same names (see :func:`instrument_s
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from decimal import Decimal
@@ -217,7 +218,8 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         instrument.update({k: _plain(e[k]) for k in INSTRUMENT_KEYS if k in e})
         instrument.update({k: meta[k] for k in INSTRUMENT_KEYS if k in meta})
         where_i = where + (f", with the top-level default(s) {inherited}" if inherited else "")
-        nyquist = 0.5 / kw["frame_interval"] if kw.get("frame_interval", 0) > 0 else None
+        fi = kw.get("frame_interval", math.nan)
+        nyquist = 0.5 / fi if 0 < fi < math.inf else None
         units_checked = e.get("check_units", True) is not False
         meta.update(check_instrument(instrument, where_i, nyquist=nyquist, check_units=units_checked))
         meta["manifest"] = str(path)

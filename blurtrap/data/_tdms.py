@@ -10,7 +10,8 @@ import math
 import os
 from pathlib import Path
 
-from ._h5 import (
+from ._recording import Recording
+from ._trace import (
     _is_volts,
     _listing,
     build_recording,
@@ -18,7 +19,6 @@ from ._h5 import (
     numeric_trace,
     positive_number,
 )
-from ._recording import Recording
 from ._units import canonical_unit
 
 TDMS_INSTALL = 'pip install "blurtrap[tdms]"'

@@ -146,15 +146,16 @@ def test_bluelake_force_channel_needs_the_force_sensitivity(h5py, tmp_path, volt
 def test_bluelake_volts_need_a_displacement_sensitivity(h5py, tmp_path, volts):
     p = tmp_path / "trap.h5"
     write_bluelake(h5py, p, volts)
-    if volts_supported():
-        rec = load_bluelake(p, force_sensitivity_pN_per_V=RF, force_offset_pN=OFFSET)
-        assert rec.n_frames == volts.size
-    else:
-        with pytest.raises(ValueError, match=(
-            r"volts need a displacement"
-            r" sensitivity.*displacement_sensitivity_m_per_V"
-        )):
-            load_bluelake(p, force_sensitivity_pN_per_V=RF)
+    # without a displacement sensitivity the signal stays in volts (a photodiode recording)
+    assert volts_supported()
+    rec = load_bluelake(p, force_sensitivity_pN_per_V=RF, force_offset_pN=OFFSET)
+    assert rec.n_frames == volts.size and rec.position_unit == "V"
+    np.testing.assert_allclose(rec.positions, volts, rtol=1e-12, atol=1e-12)
+    assert bt.data.instrument_settings(rec)["detector"] == "photodiode"
+    # and converted with one, in metres
+    conv = load_bluelake(p, force_sensitivity_pN_per_V=RF, force_offset_pN=OFFSET,
+                         displacement_sensitivity_m_per_V=SENS)
+    assert conv.position_unit == "m"
     with pytest.raises(ValueError, match=r"larger than 1 mm/V: this looks like nm/V"):
         load_bluelake(p, force_sensitivity_pN_per_V=RF, displacement_sensitivity_m_per_V=150.0)
 
@@ -431,6 +432,21 @@ def test_tdms_wf_increment(nptdms, tmp_path, rng):
         load_tdms(p, "Trap", "X", sample_rate=1e4, exposure=2e-5)
     with pytest.raises(ValueError, match=r"unit_string property is 'nm' but position_unit = 'um'"):
         load_tdms(p, "Trap", "X", position_unit="um", exposure=2e-5)
+
+
+def test_volts_from_h5_and_tdms_stay_volts(h5py, nptdms, tmp_path, rng):
+    v = rng.normal(0.0, 0.3, 1000)
+    write_h5(h5py, tmp_path / "v.h5", "qpd/x", v, {"fs": 1e5})
+    rec = load_h5(tmp_path / "v.h5", "qpd/x", position_unit="V", exposure=1e-5)
+    assert rec.position_unit == "V" and np.array_equal(rec.positions, v)
+    write_tdms(nptdms, tmp_path / "v.tdms", [("Trap", "X", v, {"wf_increment": 1e-5, "unit_string": "V"})])
+    rec = load_tdms(tmp_path / "v.tdms", exposure=1e-5)  # the unit from unit_string
+    assert rec.position_unit == "V" and np.array_equal(rec.positions, v)
+    with pytest.raises(ValueError, match=r"unit_string property is 'V' but position_unit = 'nm'"):
+        load_tdms(tmp_path / "v.tdms", position_unit="nm", exposure=1e-5)
+    with pytest.raises(ValueError, match=r"declared in volts .* below 1e-07 V"):
+        load_h5(tmp_path / "v.h5", "qpd/x", position_unit="V", exposure=1e-5).replace(
+            positions=v * 1e-9)
 
 
 def test_tdms_missing_names_and_rate(nptdms, tmp_path, rng):
