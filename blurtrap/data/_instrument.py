@@ -29,7 +29,13 @@ INSTRUMENT_KEYS = (
     "drive",
     "fit_range_Hz",
     "excluded_ranges_Hz",
+    "bead_radius_err_m",
+    "viscosity_err_Pa_s",
+    "temperature_err_K",
 )
+#: standard errors of the Stokes inputs (propagated into the calibration's errors)
+INPUT_ERROR_KEYS = {"bead_radius_err_m": "m", "viscosity_err_Pa_s": "Pa s",
+                    "temperature_err_K": "K"}
 DETECTORS = ("camera", "photodiode")
 FRICTIONS = ("free", "stokes")
 DIODE_FILTERS = ("fit", "none")
@@ -209,6 +215,13 @@ def check_instrument(
                 "stage_nm (or stage_um, stage_m) column in the CSV, or Recording(stage=...) [m]"
             )
         out["drive"] = {"frequency_Hz": f}
+    for key, unit in INPUT_ERROR_KEYS.items():
+        if key in v:
+            err = _real(where, key, v[key], unit)
+            if err < 0:
+                raise ValueError(f"{where}: {key} is a standard error and must be >= 0 "
+                                 f"[{unit}]; got {key} = {err!r}")
+            out[key] = err
     if "fit_range_Hz" in v:
         out["fit_range_Hz"] = list(_range(where, "fit_range_Hz", v["fit_range_Hz"], nyquist))
     if "excluded_ranges_Hz" in v:
@@ -243,6 +256,8 @@ def instrument_settings(recording) -> dict[str, Any]:
     - ``drive``: ``{"frequency_Hz": f}`` or None; with a drive the recording has ``stage``.
     - ``fit_range_Hz``: ``(fmin, fmax)`` or None.
     - ``excluded_ranges_Hz``: a tuple of ``(a, b)`` pairs, or None.
+    - ``bead_radius_err_m``, ``viscosity_err_Pa_s``, ``temperature_err_K``: standard errors
+      of the Stokes inputs (propagated by ``calibrate``), or None.
 
     **Raises:** ``ValueError`` naming the recording and the key for an invalid value (the
     checks of :func:`load_manifest`, plus: fit range and drive below the Nyquist frequency, a
@@ -271,6 +286,9 @@ def instrument_settings(recording) -> dict[str, Any]:
         "drive": None,
         "fit_range_Hz": None,
         "excluded_ranges_Hz": None,
+        "bead_radius_err_m": None,
+        "viscosity_err_Pa_s": None,
+        "temperature_err_K": None,
     }
     if got.get("detector") == "camera":
         out["diode_filter"] = "none"

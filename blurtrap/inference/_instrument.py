@@ -58,22 +58,6 @@ def _settings(rec) -> dict:
     return instrument_settings(rec)
 
 
-#: optional metadata keys: standard errors of the Stokes inputs, propagated into the errors
-INPUT_ERRORS = ("bead_radius_err_m", "viscosity_err_Pa_s", "temperature_err_K")
-
-
-def _input_errors(rec, i) -> list:
-    out = []
-    for key in INPUT_ERRORS:
-        v = rec.metadata.get(key)
-        if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool)
-                                  and math.isfinite(v) and v >= 0):
-            raise ValueError(f"recording {i}: {key} must be a standard error >= 0 (SI); "
-                             f"got {v!r}")
-        out.append(None if v is None else float(v))
-    return out
-
-
 def _same(values, what):
     vals = [v for v in values]
     first = vals[0]
@@ -129,7 +113,8 @@ def _stokes_gamma(recs, sts):
         eta0 = st["viscosity_Pa_s"]
         g = gamma_of(rad, eta0, temp)
         var = 0.0
-        for which, err in enumerate(_input_errors(r, i)):
+        errs = (st["bead_radius_err_m"], st["viscosity_err_Pa_s"], st["temperature_err_K"])
+        for which, err in enumerate(errs):
             if not err or (which == 1 and eta0 is None) or (which == 2 and eta0 is not None):
                 continue
             args = [rad, eta0, temp]

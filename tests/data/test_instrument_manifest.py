@@ -26,6 +26,9 @@ DEFAULTS = {
     "drive": None,
     "fit_range_Hz": None,
     "excluded_ranges_Hz": None,
+    "bead_radius_err_m": None,
+    "viscosity_err_Pa_s": None,
+    "temperature_err_K": None,
 }
 
 
@@ -119,6 +122,9 @@ def test_all_keys_together_and_instrument_keys_listed(tmp_path):
         "drive": {"frequency_Hz": 32.0},
         "fit_range_Hz": [10.0, 4000.0],
         "excluded_ranges_Hz": [[30.0, 34.0]],
+        "bead_radius_err_m": 1.5e-8,
+        "viscosity_err_Pa_s": 2e-5,
+        "temperature_err_K": 0.5,
     }
     assert set(entry) == set(INSTRUMENT_KEYS)
     rec = load_manifest(manifest(tmp_path, [entry], unit="V", stage=True))[0]
@@ -133,6 +139,8 @@ def test_all_keys_together_and_instrument_keys_listed(tmp_path):
 # -- every invalid value rejected, naming the manifest, entry, file and key ---------------------
 
 REJECTED = [
+    ({"bead_radius_err_m": -1e-9}, "bead_radius_err_m", r"standard error and must be >= 0"),
+    ({"temperature_err_K": "1 K"}, "temperature_err_K", r"must be a number"),
     ({"detector": "ccd"}, "detector", r"must be 'camera' or 'photodiode'"),
     ({"detector": 1}, "detector", r"must be 'camera' or 'photodiode'"),
     ({**PHOTODIODE, "anti_aliasing": "yes"}, "anti_aliasing", r"true or false"),
