@@ -75,6 +75,54 @@ class BatchCalibration:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in out.items()}
 
+    #: per-item columns by name (``batch["k"]``): SI arrays
+    _COLUMNS = ("k", "k_err", "gamma", "gamma_err", "tracking_var", "tracking_var_err",
+                "diffusion", "status", "success", "gof_p", "lag1_z", "at_bound")
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """A per-item column by name (SI): ``batch["k"]``, ``batch["gamma_err"]``,
+        ``batch["D"]`` (= diffusion), ``batch["status"]`` ..."""
+        key = "diffusion" if name == "D" else name
+        if key not in self._COLUMNS or getattr(self, key) is None:
+            raise KeyError(f"no column {name!r}; columns: "
+                           f"{[c for c in self._COLUMNS if getattr(self, c) is not None]}")
+        return np.asarray(getattr(self, key))
+
+    def to_dataframe(self):
+        """One row per item: values and errors in SI and lab units, status, goodness of fit.
+        Needs pandas (``pip install "blurtrap[pandas]"``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError('to_dataframe needs pandas: pip install "blurtrap[pandas]"'
+                              ) from None
+        cols = {c: np.ravel(getattr(self, c)) for c in self._COLUMNS
+                if getattr(self, c) is not None}
+        cols["k_pN_per_nm"] = cols["k"] * 1e3
+        cols["gamma_pN_s_per_um"] = cols["gamma"] * 1e6
+        cols["D_um2_per_s"] = cols["diffusion"] * 1e12
+        return pd.DataFrame(cols)
+
+    def summary(self) -> str:
+        """Counts by status and the median k, gamma, D of the "ok" items, in lab units."""
+        status = np.ravel(self.status)
+        ok = status == "ok"
+        kinds, counts = np.unique([s.split(":")[0] for s in status], return_counts=True)
+        lines = [f"{len(status)} items ({self.method}, model {self.model}): "
+                 + ", ".join(f"{c} {k}" for k, c in zip(kinds, counts))]
+        if ok.any():
+            for name, fac, unit in (("k", 1e3, "pN/nm"), ("gamma", 1e6, "pN s/um"),
+                                    ("diffusion", 1e12, "um^2/s")):
+                v = np.ravel(getattr(self, name))[ok] * fac
+                lines.append(f"  {name}: median {np.median(v):.5g} {unit} (16-84 %: "
+                             f"{np.percentile(v, 16):.4g}..{np.percentile(v, 84):.4g})")
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        import html
+
+        return f"<pre>{html.escape(self.summary())}</pre>"
+
 
 class _Rec:
     def __init__(self, dt, w, t):

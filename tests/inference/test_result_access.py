@@ -60,3 +60,35 @@ def test_dataframe_without_pandas_says_how_to_install(res, monkeypatch):
     monkeypatch.setitem(sys.modules, "pandas", None)
     with pytest.raises(ImportError, match=r'blurtrap\[pandas\]'):
         res.to_dataframe()
+
+
+@pytest.fixture(scope="module")
+def batch():
+    import jax
+
+    import blurtrap as bt
+
+    dt = 1 / 1500
+    gamma = 6 * math.pi * 0.00093 * 1.53e-6
+    x = bt.simulate(5e-5, gamma, dt, dt, 8192, key=jax.random.key(4), n_traces=6,
+                    method="exact_frames", tracking_std=2e-9)
+    return bt.calibrate_batch(np.asarray(x), frame_interval=dt, exposure=dt)
+
+
+def test_batch_columns_by_name(batch):
+    assert np.array_equal(batch["k"], batch.k) and batch["k"].shape == (6,)
+    assert np.array_equal(batch["D"], batch.diffusion)
+    assert set(batch["status"]) <= {"ok"} or batch["status"].dtype.kind in "UO"
+    with pytest.raises(KeyError, match="columns"):
+        batch["stiffness"]
+
+
+def test_batch_summary_html_and_dataframe(batch):
+    pytest.importorskip("pandas")
+    text = batch.summary()
+    assert text.startswith("6 items") and "pN/nm" in text
+    assert batch._repr_html_().startswith("<pre>")
+    df = batch.to_dataframe()
+    assert len(df) == 6
+    np.testing.assert_allclose(df["k_pN_per_nm"], batch.k * 1e3)
+    np.testing.assert_allclose(df["D_um2_per_s"], batch.diffusion * 1e12)
