@@ -196,7 +196,74 @@ def build_parser() -> argparse.ArgumentParser:
                    help="family-wise false-alarm rate (default 0.05)")
     g.add_argument("--json", action="store_true", help="print one JSON object")
     _add_debug(g)
+    _add_design_parser(sub)
     return p
+
+
+def _add_design_parser(sub):
+    d = sub.add_parser(
+        "design", help="recommend frame rate, exposures and record length (Fisher information)",
+        description="Recommend an acquisition (frame interval, exposure series, frames) that "
+        "minimises the predicted standard error of k and/or gamma, for a bead in a trap of "
+        "expected stiffness, and compare it with the paper's series and your current design. "
+        "Lab units on the command line.")
+    d.add_argument("--k", type=float, nargs="+", required=True, metavar="PN_PER_NM",
+                   help="expected stiffness [pN/nm], or a range K_MIN K_MAX (worst case)")
+    fr = d.add_mutually_exclusive_group(required=True)
+    fr.add_argument("--radius-um", type=float, metavar="UM", help="bead radius [um] (Stokes)")
+    fr.add_argument("--gamma", type=float, metavar="PN_S_PER_UM", help="friction [pN s/um]")
+    d.add_argument("--viscosity", type=float, default=None, metavar="PA_S",
+                   help="viscosity [Pa s] for --radius-um (default water at --temperature)")
+    d.add_argument("--temperature", type=float, default=295.0, metavar="K",
+                   help="temperature [K] (default 295)")
+    d.add_argument("--max-fps", type=float, required=True, help="fastest frame rate [Hz]")
+    d.add_argument("--min-exposure-ms", type=float, default=1e-3, metavar="MS",
+                   help="shortest exposure [ms] (default 0.001)")
+    d.add_argument("--dead-time-ms", type=float, default=0.0, metavar="MS",
+                   help="camera dead time [ms]: W <= dt - dead time (default 0)")
+    n = d.add_mutually_exclusive_group(required=True)
+    n.add_argument("--frames", type=int, help="frames per recording")
+    n.add_argument("--total-s", type=float, metavar="S",
+                   help="total recording time [s] shared by all recordings")
+    d.add_argument("--tracking-nm", type=float, default=0.0, metavar="NM",
+                   help="tracking-error rms [nm] (default 0)")
+    d.add_argument("--photon-limited", action="store_true",
+                   help="tracking error grows as sqrt(1/W) below the reference exposure")
+    d.add_argument("--target", choices=("k", "gamma", "both"), default="k",
+                   help="what to minimise the SE of (default k)")
+    d.add_argument("--series", type=int, nargs="+", default=(1, 2, 3), metavar="N",
+                   help="numbers of exposures to try at a common frame interval (default "
+                   "1 2 3; 1 = one recording)")
+    d.add_argument("--plot", metavar="PNG", default=None,
+                   help="also write the predicted-SE figure to this PNG file")
+    d.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
+    _add_debug(d)
+
+
+def _design(args) -> int:
+    from .design import design
+
+    if len(args.k) not in (1, 2):
+        raise CliError(f"--k takes one stiffness or a range K_MIN K_MAX [pN/nm]; got {args.k}")
+    k = tuple(v * 1e-3 for v in args.k)
+    res = design(k=k[0] if len(k) == 1 else k,
+                 gamma=None if args.gamma is None else args.gamma * 1e-6,
+                 radius=None if args.radius_um is None else args.radius_um * 1e-6,
+                 viscosity=args.viscosity, temperature=args.temperature,
+                 max_fps=args.max_fps, min_exposure=args.min_exposure_ms * 1e-3,
+                 dead_time=args.dead_time_ms * 1e-3, n_frames=args.frames,
+                 total_time=args.total_s, tracking_std=args.tracking_nm * 1e-9,
+                 photon_limited=args.photon_limited, target=args.target,
+                 series=tuple(args.series))
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from .plotting import save
+
+        save(res.plot(), args.plot)
+    print(dumps_json(res.to_dict()) if args.json else res.summary())
+    return 0
 
 
 # ------------------------------------------------------------------------------------------
@@ -419,6 +486,8 @@ def main(argv=None) -> int:
             return _calibrate(args)
         if args.command == "diagnose":
             return _diagnose(args)
+        if args.command == "design":
+            return _design(args)
         raise CliError(f"unknown command {args.command!r}")  # pragma: no cover
     except BrokenPipeError:  # output piped into e.g. `head`: not an error
         import os
