@@ -65,7 +65,7 @@ def test_camera_with_drive_in_the_trace_and_known_friction(tmp_path, capsys,
                                                 "bead_radius_m": radius, "viscosity_Pa_s": ETA})
     out = _cli_json(_manifest(tmp_path, rec), capsys=capsys)
     assert abs(out["k"] - K_CAM) < 3.5 * out["k_err"]
-    assert out["k_err"] < 0.03 * K_CAM
+    assert out["k_err"] < 0.05 * K_CAM  # 1 nm tracking noise competes with k (eps^2 free)
     assert out["gamma"] == pytest.approx(GAMMA_CAM, rel=1e-9)
     assert any("16.8" in n and "line" in n for n in out["notes"])
     assert any(n.startswith("friction: Stokes") for n in out["notes"])

@@ -94,7 +94,7 @@ def _detector_model(st, detector, anti_aliasing, notes) -> TrapModel:
 
 def _stokes_gamma(recs, sts):
     """(gamma, se) of the known bead for every recording (Stokes x Faxen); one value."""
-    from ..physics import faxen_factor, water_viscosity
+    from ..physics._effects import water_viscosity
 
     out = []
     for i, (r, st) in enumerate(zip(recs, sts)):
@@ -107,7 +107,12 @@ def _stokes_gamma(recs, sts):
         def gamma_of(radius, eta_given, temperature, st=st):
             eta = eta_given if eta_given is not None else float(water_viscosity(temperature))
             h = st["distance_to_surface_m"]
-            fax = 1.0 if h is None else float(faxen_factor(radius, h))
+            if h is None:
+                fax = 1.0
+            else:
+                from ..physics import faxen_factor
+
+                fax = float(faxen_factor(radius, h))
             return 6.0 * math.pi * eta * radius * fax
 
         eta0 = st["viscosity_Pa_s"]
@@ -153,11 +158,7 @@ def _clean_lines(recs, sts, lines, notes, excluded):
     out, drive = [], None
     if lines == "keep" and not any((s["drive"] or {}) for s in sts):
         return list(recs), None
-    try:  # TEMP until the line finder lands
-        from ._active import drive_response
-        from ._lines import find_lines, remove_lines
-    except ImportError:
-        return list(recs), None
+    from ._lines import find_lines, remove_lines
 
     for i, (r, st) in enumerate(zip(recs, sts)):
         x = np.asarray(r.positions, dtype=float)
@@ -171,6 +172,8 @@ def _clean_lines(recs, sts, lines, notes, excluded):
             if drive is not None:
                 raise ValueError("active calibration from more than one driven recording is "
                                  "not supported yet: calibrate each driven recording alone")
+            from ._active import drive_response
+
             resp = drive_response(x, np.asarray(stage, dtype=float), dt, float(r.exposure),
                                   frequency=f_d)
             drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure))
