@@ -162,6 +162,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--exclude", type=float, nargs=2, action="append", default=None,
                    metavar=("F_LOW", "F_HIGH"),
                    help="exclude this band [Hz] from the spectral fit (repeatable)")
+    c.add_argument("--fix", action="append", default=None, metavar="NAME=VALUE",
+                   help="hold a parameter at a value in lab units (k in pN/nm, gamma in "
+                   "pN s/um, tracking_var in nm^2, ...), optionally +-SE: gamma=0.0095+-0.0003 "
+                   "(repeatable)")
     c.add_argument("--lines", choices=("auto", "keep"), default="auto",
                    help="auto (default): find strong narrow lines (drives, mains) and "
                    "subtract them before fitting; keep: fit the trace as it is")
@@ -382,6 +386,8 @@ def _calibrate(args) -> int:
     if args.exclude:
         kw["excluded_ranges"] = [tuple(r) for r in args.exclude]
     kw["lines"] = args.lines
+    if args.fix:
+        kw["fixed"] = _fixed_arg(args.fix)
     if args.diffusion is not None:  # calibrate checks that the method uses it
         if not (0 < args.diffusion <= 1e4):
             raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
@@ -407,6 +413,28 @@ def _calibrate(args) -> int:
         if post is not None:
             print(post.summary())
     return 0
+
+
+def _fixed_arg(items) -> dict:
+    """``--fix NAME=VALUE[+-SE]`` in lab units -> calibrate's ``fixed`` in SI."""
+    from .inference._result import LAB
+
+    out = {}
+    for item in items:
+        name, sep, rest = item.partition("=")
+        name = name.strip()
+        value, _, se = rest.partition("+-")
+        fac = LAB.get(name, (1.0, ""))[0]
+        try:
+            v = float(value) / fac
+            e = float(se) / fac if se else 0.0
+        except ValueError:
+            raise CliError(f"--fix takes NAME=VALUE or NAME=VALUE+-SE in lab units (e.g. "
+                           f"tracking_var=0 or gamma=0.0095+-0.0003); got {item!r}") from None
+        if not sep or not name:
+            raise CliError(f"--fix takes NAME=VALUE; got {item!r}")
+        out[name] = (v, e)
+    return out
 
 
 def _model_arg(text: str) -> str:

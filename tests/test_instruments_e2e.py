@@ -98,11 +98,12 @@ def test_keeping_the_line_is_what_went_wrong(camera_drive_trace):
 
 
 def test_camera_dt_much_longer_than_tau_needs_known_friction(tmp_path, capsys):
-    """W << dt and dt >> tau: no temporal information. Free friction is refused with a
-    clear message; Stokes friction gives k from the blurred variance."""
+    """W < dt and dt >> tau: no temporal information. Free friction is refused with a clear
+    message, and so is Stokes friction while eps^2 is free (k and eps^2 share the variance);
+    with both known, k comes from the blurred variance."""
     k, dt, w = 2e-4, 1 / 200, 1e-3
-    gamma = 6 * math.pi * ETA * 1e-6
-    x, _ = generate(k, gamma, dt, w, 2**14, 8, temperature=T, substeps=40)
+    gamma = 6 * math.pi * ETA * 1e-6  # tau = 88 us: fine steps of 5 us below
+    x, _ = generate(k, gamma, dt, w, 2**13, 8, temperature=T, substeps=1000)
     rec = bt.Recording(x[0], frame_interval=dt, exposure=w, temperature=T,
                        metadata={"detector": "camera", "bead_radius_m": 1e-6,
                                  "viscosity_Pa_s": ETA})
@@ -110,7 +111,10 @@ def test_camera_dt_much_longer_than_tau_needs_known_friction(tmp_path, capsys):
     code = main(["calibrate", str(path)])
     err = capsys.readouterr().err
     assert code != 0 and ("temporal" in err or "dt >> tau" in err)
-    out = _cli_json(path, "--friction", "stokes", capsys=capsys)
+    code = main(["calibrate", str(path), "--friction", "stokes"])
+    err = capsys.readouterr().err
+    assert code != 0 and "tracking_var" in err
+    out = _cli_json(path, "--friction", "stokes", "--fix", "tracking_var=0", capsys=capsys)
     assert abs(out["k"] - k) < 3.5 * out["k_err"] and out["k_err"] < 0.1 * k
 
 

@@ -1326,6 +1326,14 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
                          f"{best:.1f} standard errors above 0); joint likelihood")
         elif "gamma" in fixed:
             best = max(z for _, z in info)
+            if mdl.noise and "tracking_var" not in fixed:
+                raise FitError(
+                    f"the frames carry no temporal information (lag-1 correlation only "
+                    f"{best:.1f} standard errors above 0: dt >> tau, W < dt): with gamma known, "
+                    "k follows from the blurred variance var = kT/k S(W k/gamma) + eps^2 alone, "
+                    "which cannot separate k from the tracking-error variance eps^2. Give it: "
+                    "fixed={'tracking_var': eps2} in m^2 (0 when the tracking error is "
+                    "negligible; CLI --fix tracking_var=NM2), or record at several exposures")
             notes.append(f"auto: frames carry little temporal information (lag-1 correlation "
                          f"{best:.1f} standard errors above 0: dt >> tau); gamma is held at the "
                          "given friction, so the joint likelihood gives k from the "
