@@ -152,7 +152,10 @@ def drive_response(positions, stage, frame_interval, exposure, *, frequency=None
     s, _ = check_trace(stage, dt, "stage", min_frames=64)
     if s.size != x.size:
         raise ValueError(f"stage must have one sample per frame of positions ({x.size}); got {s.size}.")
-    w = float(exposure) if np.isscalar(exposure) else np.nan
+    try:
+        w = float(exposure)
+    except (TypeError, ValueError):
+        w = np.nan
     if not (np.isfinite(w) and 0.0 <= w <= dt * (1 + 1e-12)):
         raise ValueError(f"exposure must be in [0, frame_interval = {dt:.6g}] s; got {exposure!r}.")
     n, dur = x.size, x.size * dt

@@ -196,6 +196,7 @@ def test_detector_transfer():
      (dict(frequency=0.0), r"frequency must be a positive, finite number \[Hz\]; got 0.0"),
      (dict(exposure=2e-3), r"exposure must be in \[0, frame_interval = 0.001\] s; got 0.002"),
      (dict(exposure=-1e-4), r"exposure must be in \[0, frame_interval"),
+     (dict(exposure="long"), r"exposure must be in \[0, frame_interval = 0.001\] s; got 'long'"),
      (dict(positions=np.zeros((1000, 2))), r"positions must be a 1-D trace"),
      (dict(stage=np.r_[np.ones(999), np.inf]), r"stage must be finite; frame 999 is inf"),
      (dict(stage=np.random.default_rng(1).standard_normal(1000) * 1e-9), r"stage shows no clear drive"),
