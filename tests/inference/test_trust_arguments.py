@@ -18,6 +18,7 @@ from blurtrap.diagnostics import _diagnose as diag_mod
 from blurtrap.inference import FitError
 from blurtrap.inference import _calibrate as cal_mod
 from blurtrap.inference import _posterior as post_mod
+from blurtrap.inference import _posterior_priors as prior_mod
 
 KT = 1.380649e-23 * 295.0
 GAMMA = 6 * math.pi * 9.3e-4 * 1.53e-6
@@ -153,7 +154,7 @@ def test_user_prior_with_unknown_name_or_vector_output(rec, monkeypatch):
 
 def test_traceable_user_priors_pass_the_check():
     names = ("k", "gamma", "tracking_var")
-    post_mod._check_user_priors(
+    prior_mod._check_user_priors(
         (lambda p: jnp.log(p["k"]), lambda p: jnp.where(p["k"] > 1e-5, 0.0, -10.0),
          lambda p: 0.0), names)
 
