@@ -14,6 +14,7 @@ import pytest
 from scipy.signal import lfilter
 
 import blurtrap as bt
+from blurtrap.diagnostics import _candidates as cand_mod
 from blurtrap.diagnostics import _diagnose as diag_mod
 from blurtrap.inference import FitError
 from blurtrap.inference import _calibrate as cal_mod
@@ -75,11 +76,11 @@ def test_diagnose_unknown_candidates_are_refused(rec, monkeypatch, cands, fn):
 
 
 def test_diagnose_valid_candidates_pass_the_check():
-    assert diag_mod._check_candidates(["drift", "drift", "anharmonicity"]) == [
+    assert cand_mod._check_candidates(["drift", "drift", "anharmonicity"]) == [
         "drift", "anharmonicity"]
-    assert diag_mod._check_candidates("line_noise") == ["line_noise"]
-    assert diag_mod._check_candidates(None) is None
-    assert diag_mod._check_alpha(0.01) == 0.01
+    assert cand_mod._check_candidates("line_noise") == ["line_noise"]
+    assert cand_mod._check_candidates(None) is None
+    assert cand_mod._check_alpha(0.01) == 0.01
 
 
 # ------------------------------------------------------------------------------------------
