@@ -138,16 +138,18 @@ def _per_call_ms(fn, th, repeats=7, inner=50):
 
 
 def per_call_study(y) -> dict:
-    from blurtrap.inference import _posterior as pm
+    from blurtrap.inference import _log_posterior as lp
     from blurtrap.inference._calibrate import _spectral_args
     from blurtrap.inference._models import get_model
+    from blurtrap.inference._posterior_priors import _resolve_priors
     from blurtrap.inference._problems import make_layout
+    from blurtrap.inference._whittle_closed import _rational_args
 
     r = rec(y)
     lay = make_layout([r], "shared", True)
     spec = _spectral_args([r], lay, get_model(None), 1, None)
-    rat = pm._rational_args([r], spec)
-    pri = pm._resolve_priors(lay, None)[0]
+    rat = _rational_args([r], spec)
+    pri = _resolve_priors(lay, None)[0]
     ml = blurtrap.calibrate(r, method="likelihood", likelihood="whittle")
     rng = np.random.default_rng(0)
     out = {}
@@ -164,9 +166,9 @@ def per_call_study(y) -> dict:
         for label, lik in (("jax_closed_form_lags_ms", rat),
                            ("jax_generic_ordinates_ms", plain),
                            ("jax_expected_periodogram_ms", spec)):
-            args = pm._PostArgs(lik=lik, priors=pri, names=lay.names, user_log_prior=(),
+            args = lp._PostArgs(lik=lik, priors=pri, names=lay.names, user_log_prior=(),
                                 chunk=1)
-            fn = pm._compiled_log_posterior(args)
+            fn = lp._compiled_log_posterior(args)
             vals = fn(th)
             row[label] = _per_call_ms(fn, th)
             if lik is not spec:  # the expected periodogram differs by design (leakage)
@@ -178,14 +180,15 @@ def per_call_study(y) -> dict:
 
 
 def timing_study(n_steps: int = 2000) -> dict:
+    from blurtrap.inference import _log_posterior as lp
     from blurtrap.inference import _posterior as pm
 
     ys = simulate([2e-5, 2e-5, 3e-5], seed=99)
-    n0 = pm.trace_count()
+    n0 = lp.trace_count()
     t0 = time.perf_counter()
     first = pm.sample_posterior(rec(ys[0]), n_walkers=32, n_steps=n_steps, seed=0)
     t_first = time.perf_counter() - t0
-    n_first = pm.trace_count() - n0
+    n_first = lp.trace_count() - n0
     runs = []
     for i in (1, 2, 1, 2):
         t0 = time.perf_counter()
@@ -198,7 +201,7 @@ def timing_study(n_steps: int = 2000) -> dict:
         "first_call_total_s": t_first,
         "first_call_sampling_s": first.timing["sampling_s"],
         "traces_after_first_call": n_first,
-        "traces_after_five_calls": pm.trace_count() - n0,
+        "traces_after_five_calls": lp.trace_count() - n0,
         "runs_after_compilation": runs,
         "autocorr_time": first.autocorr_time,
         "acceptance": float(np.mean(first.acceptance_fraction)),

@@ -13,12 +13,13 @@ so that ``E[I_j] = P_d(f_j)``. A sinusoid ``A cos(2 pi f t + phi)`` exactly on a
 frequency adds ``N dt A^2 / 4`` to its ordinate.
 
 **The test.** Away from lines, ``I_j / P(f_j)`` is Exp(1). The local spectrum ``P`` is
-estimated by a running median over a window of about +-10 % in frequency (2 % of a
-decade-spanning log axis; at least +-100 bins, symmetric about the bin so that a monotone
-spectrum such as a Lorentzian's rise or 1/f^2 drift is not biased) divided by the mean of
-that order statistic of Exp(1) (-> ln 2). For a window of ``m`` other ordinates whose
-median is the k-th smallest, the probability of a ratio above ``r`` is exact (Renyi's
-representation of exponential order statistics):
+estimated by a running median over a window of about +-10 % in frequency (0.2 in ln f, 1.5-2 %
+of the log-frequency span of a 10^4-10^6-bin periodogram; at least +-100 bins; symmetric in
+bins about the ordinate, so that a monotone spectrum such as a Lorentzian's fall or 1/f^2 drift
+is not biased), divided by the mean of that order statistic of Exp(1) (-> ln 2). The medians
+are taken at centres 2 % apart in frequency and interpolated in log-log between them. For a
+window of ``m`` other ordinates whose median is the k-th smallest, the probability of a ratio
+above ``r`` is exact (Renyi's representation of exponential order statistics):
 ``p(r) = prod_{i=m-k+1}^{m} i / (i + r/c)`` with ``c = E[X_(k)]``, which accounts for the
 noise of the reference itself. A bin is a line when ``M p(r) < p_value`` (Bonferroni over
 the ``M`` tested bins), so the family-wise false-alarm rate per record is at most about
@@ -26,9 +27,10 @@ the ``M`` tested bins), so the family-wise false-alarm rate per record is at mos
 search, so a strong line's leakage is never mistaken for more lines.
 
 **Refinement.** Around the peak bin the exact least-squares sinusoid power (mean, cos and sin
-regressed jointly) is evaluated on a 0.1-bin grid, maximised by golden-section search and
-polished by a Gauss-Newton step, which also gives the frequency's standard error
-(the white-noise Cramer-Rao form with the local spectrum in place of sigma^2 dt).
+regressed jointly) is evaluated on a 0.15-bin grid, interpolated by a parabola, maximised by a
+few golden-section steps and polished by Gauss-Newton steps. The frequency's standard error is
+the Cramer-Rao form for a sinusoid in white noise with the local spectrum in place of
+``sigma^2 dt``. With several lines, each is refined once more with the others subtracted.
 
 **References:** Fisher (1929) and Priestley, *Spectral Analysis and Time Series* (1981),
 section 6.1.4 (tests for periodicities); Renyi (1953) for exponential order statistics;
@@ -153,8 +155,9 @@ def _tested(n_frames: int, n_bins: int):
 def _scan(power, n_frames: int, p_value: float):
     """Bonferroni-adjusted p-values of the tested ordinates of ``power`` (..., M).
 
-    Only ordinates whose ratio can reach the level are evaluated exactly (the rest are 1):
-    ``p(r) >= exp(-r E[X_(k)]/c)`` (Jensen) and ``E[X_(k)]/c <= 2.2``.
+    Only ordinates whose ratio can reach the level are evaluated exactly (the rest are 1): the
+    reference is unbiased, so ``p(r) >= exp(-r)`` (Jensen) and a line needs ``r > ln(M/p_value)``;
+    the candidates ``r > ln(M/p_value)/2.2`` are a generous superset (interpolated references).
 
     **Returns:** ``(adjusted p (..., M), ratio (..., M), n_tested)``.
     """

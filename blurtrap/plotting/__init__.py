@@ -19,43 +19,21 @@ The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 Experiment design: :func:`design_se` (also ``DesignResult.plot()``).
 """
 
+from ._blur_figs import fig1a_universal_curve as fig1a_universal_curve
+from ._blur_figs import fig1b_histogram as fig1b_histogram
+from ._blur_figs import naive_error_map as naive_error_map
 from ._common import LAB_UNITS as LAB_UNITS
 from ._common import close as close
 from ._common import save as save
+from ._corner import corner as corner
 from ._design import design_se as design_se
-from ._extra import (
-    corner as corner,
-)
-from ._extra import (
-    diagnose_ranking as diagnose_ranking,
-)
-from ._extra import (
-    naive_error_map as naive_error_map,
-)
-from ._extra import (
-    residuals_before_after as residuals_before_after,
-)
-from ._paper import (
-    fig1a_universal_curve as fig1a_universal_curve,
-)
-from ._paper import (
-    fig1b_histogram as fig1b_histogram,
-)
-from ._paper import (
-    fig3_fractional_variance as fig3_fractional_variance,
-)
-from ._paper import (
-    fig4_stiffness_vs_power as fig4_stiffness_vs_power,
-)
-from ._paper import (
-    fig5_highpass as fig5_highpass,
-)
-from ._paper import (
-    fig6_psd as fig6_psd,
-)
-from ._paper import (
-    fig7_deviation as fig7_deviation,
-)
+from ._drift_fig import fig5_highpass as fig5_highpass
+from ._psd_figs import fig6_psd as fig6_psd
+from ._psd_figs import fig7_deviation as fig7_deviation
+from ._psd_figs import residuals_before_after as residuals_before_after
+from ._ranking import diagnose_ranking as diagnose_ranking
+from ._variance_figs import fig3_fractional_variance as fig3_fractional_variance
+from ._variance_figs import fig4_stiffness_vs_power as fig4_stiffness_vs_power
 
 __all__ = [
     "LAB_UNITS",

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 
 import blurtrap
-from blurtrap.inference import _posterior as post_mod
+from blurtrap.inference import _log_posterior as lp_mod
+from blurtrap.inference import _posterior_priors as prior_mod
+from blurtrap.inference import _whittle_closed as wc_mod
 from blurtrap.inference._posterior import Posterior, ShortChainWarning, sample_posterior
 from blurtrap.inference._priors import (
     InverseGamma,
@@ -171,13 +173,13 @@ def test_same_seed_identical_and_no_global_rng(short_rec, short_post):
 
 def test_two_compiled_batch_shapes(short_rec):
     # a walker count not used elsewhere: exactly two new traces (full and half ensemble)
-    n0 = post_mod.trace_count()
+    n0 = lp_mod.trace_count()
     _quiet_sample(short_rec, n_walkers=14, n_steps=40, seed=0)
-    assert post_mod.trace_count() - n0 == 2
+    assert lp_mod.trace_count() - n0 == 2
     # new data of the same shapes reuse both
     rec2 = _rec(_sim(3e-5, N_SHORT, 8)[0])
     _quiet_sample(rec2, n_walkers=14, n_steps=40, seed=1)
-    assert post_mod.trace_count() - n0 == 2
+    assert lp_mod.trace_count() - n0 == 2
 
 
 def test_short_chain_warns(short_rec):
@@ -192,13 +194,13 @@ def test_nan_maps_to_minus_inf(short_rec):
 
     lay = make_layout([short_rec], "shared", True)
     spec = _spectral_args([short_rec], lay, get_model(None), 1, None)
-    for lik in (spec, post_mod._rational_args([short_rec], spec)):
-        args = post_mod._PostArgs(
-            lik=lik, priors=post_mod._resolve_priors(lay, None)[0], names=lay.names,
+    for lik in (spec, wc_mod._rational_args([short_rec], spec)):
+        args = lp_mod._PostArgs(
+            lik=lik, priors=prior_mod._resolve_priors(lay, None)[0], names=lay.names,
             user_log_prior=(), chunk=1)
         th = np.log([[2e-5, GAMMA, 4e-18], [2e-5, GAMMA, 4e-18]])
         th[1, 2] = 800.0  # eps^2 overflows: inf - inf inside
-        out = np.asarray(post_mod._batched_log_posterior(jnp.asarray(th), args))
+        out = np.asarray(lp_mod._batched_log_posterior(jnp.asarray(th), args))
         assert np.isfinite(out[0]) and out[1] == -np.inf
 
 
@@ -267,16 +269,16 @@ def test_log_posterior_is_likelihood_plus_prior_plus_jacobian(short_rec):
     lay = make_layout([rec], "shared", True)
     mdl = get_model(None)
     gprior = Normal(GAMMA, 0.05 * GAMMA)
-    priors, fns = post_mod._resolve_priors(lay, {"gamma": gprior})
+    priors, fns = prior_mod._resolve_priors(lay, {"gamma": gprior})
     th = np.log([[2e-5, GAMMA, 4e-18], [3e-5, 1.1 * GAMMA, 2e-18]])
     spec = _spectral_args([rec], lay, mdl, 1, None)
-    rat = post_mod._rational_args([rec], spec)
+    rat = wc_mod._rational_args([rec], spec)
     for lik, nll, chunk in ((spec, spectral_nll, 1),
-                            (rat, post_mod._rational_whittle_nll, 1),
+                            (rat, wc_mod._rational_whittle_nll, 1),
                             (make_exact_args([rec], lay, mdl), exact_nll, None)):
-        args = post_mod._PostArgs(lik=lik, priors=priors, names=lay.names,
+        args = lp_mod._PostArgs(lik=lik, priors=priors, names=lay.names,
                                   user_log_prior=fns, chunk=chunk)
-        got = post_mod._compiled_log_posterior(args)(th)
+        got = lp_mod._compiled_log_posterior(args)(th)
         assert got.dtype == np.float64 and isinstance(got, np.ndarray)
         for t, g in zip(th, got, strict=True):
             p = jnp.exp(jnp.asarray(t))

@@ -20,6 +20,8 @@ import pytest
 
 import blurtrap
 from blurtrap.inference import _posterior as pm
+from blurtrap.inference import _posterior_result as res_mod
+from blurtrap.inference import _whittle_closed as wc_mod
 from blurtrap.inference._calibrate import _spectral_args
 from blurtrap.inference._models import get_model
 from blurtrap.inference._posterior import ShortChainWarning, sample_posterior
@@ -86,9 +88,9 @@ CASES = {
 def _all_paths(ps, rat):
     """(trials, 3): the auto, lag-sum and ordinate evaluations, and lag_ok, per trial."""
     def one(p):
-        vals = [pm._rational_whittle_nll(p, rat, path)
+        vals = [wc_mod._rational_whittle_nll(p, rat, path)
                 for path in ("auto", "lags", "ordinates")]
-        return jnp.stack(vals), pm._rational_parts(p, rat)["lag_ok"]
+        return jnp.stack(vals), wc_mod._rational_parts(p, rat)["lag_ok"]
 
     return jax.vmap(one)(ps)
 
@@ -105,8 +107,8 @@ def test_closed_form_whittle_equals_literal_sum(case):
     mdl = get_model(model)
     lay = make_layout(recs, k_mode, mdl.noise, tuple(p.name for p in mdl.extra_params))
     spec = _spectral_args(recs, lay, mdl, 1, None)
-    assert pm._rational_ok(mdl, None)
-    rat = pm._rational_args(recs, spec)
+    assert wc_mod._rational_ok(mdl, None)
+    rat = wc_mod._rational_args(recs, spec)
     vals = {"k": 2e-5, "c": 2e-4, "gamma": GAMMA, "tracking_var": EPS**2, "power_offset": 0.01}
     ps = np.array([[vals[n.split("[")[0]] * math.exp(0.3 * rng.normal()) for n in lay.names]
                    for _ in range(3)])
@@ -132,13 +134,13 @@ def test_closed_form_whittle_falls_back_for_large_theta():
         rec = blurtrap.Recording(y, frame_interval=1e-5, exposure=1e-6)
         lay = make_layout([rec], "shared", True)
         spec = _spectral_args([rec], lay, get_model(None), 1, None)
-        rat = pm._rational_args([rec], spec)
+        rat = wc_mod._rational_args([rec], spec)
         for eps2, lag_ok in ((1e-20, True), (1e-13, False)):
             p = jnp.asarray([1e-6, GAMMA, eps2])
-            parts = pm._rational_parts(p, rat)
+            parts = wc_mod._rational_parts(p, rat)
             assert bool(parts["lag_ok"]) is lag_ok, (n, eps2, float(parts["theta"][0]))
             want = _numpy_whittle_nll([rec], [1e-6], GAMMA, eps2)
-            assert float(pm._rational_whittle_nll(p, rat)) == pytest.approx(want, rel=1e-11)
+            assert float(wc_mod._rational_whittle_nll(p, rat)) == pytest.approx(want, rel=1e-11)
         assert float(parts["theta"][0]) < -0.9
 
 
@@ -151,7 +153,7 @@ def test_leakage_decides_the_whittle_form():
                                  frame_interval=DT, exposure=DT)
         lay = make_layout([rec], "shared", True)
         spec = _spectral_args([rec], lay, get_model(None), 1, None)
-        return pm._leakage(np.array([k, GAMMA, EPS**2]), pm._rational_args([rec], spec))
+        return wc_mod._leakage(np.array([k, GAMMA, EPS**2]), wc_mod._rational_args([rec], spec))
 
     for k, n in ((5e-6, 65536), (2e-5, 16384), (1e-4, 4096), (2e-6, 2048)):
         # num(0) = P_d(0) (1 - rho)^2 / dt, from the public spectrum and autocovariance
@@ -161,7 +163,7 @@ def test_leakage_decides_the_whittle_form():
         c1 = float(blurtrap.frame_autocovariance(1, k, GAMMA, DT, DT, 295.0, EPS**2))
         want = 2.0 * c1 * DT / (n * p0 * (1.0 - rho) ** 2) * math.sqrt(n)
         assert leak(k, n) == pytest.approx(want, rel=1e-9), (k, n)
-    assert leak(5e-6, 65536) < pm.LEAKAGE_MAX < leak(2e-6, 2048)
+    assert leak(5e-6, 65536) < wc_mod.LEAKAGE_MAX < leak(2e-6, 2048)
 
 
 # ------------------------------------------------------------------------------------------
@@ -301,7 +303,7 @@ def test_derived_k_with_power_offset():
             for pw in (0.05, 0.1)]
     lay = make_layout(recs, "linear_power", True, ("power_offset",))
     chain = np.array([[[2e-4, GAMMA, 4e-18, 0.01]], [[3e-4, GAMMA, 4e-18, 0.02]]])
-    s = pm._derived(lay, chain, 295.0)
+    s = res_mod._derived(lay, chain, 295.0)
     assert np.allclose(s["k[P=50 mW]"], [2e-4 * 0.04, 3e-4 * 0.03], rtol=1e-14)
     assert np.allclose(s["k[P=100 mW]"], [2e-4 * 0.09, 3e-4 * 0.08], rtol=1e-14)
     assert np.allclose(s["power_offset"], [0.01, 0.02])

@@ -14,10 +14,12 @@ import pytest
 from scipy.signal import lfilter
 
 import blurtrap as bt
+from blurtrap.diagnostics import _candidates as cand_mod
 from blurtrap.diagnostics import _diagnose as diag_mod
 from blurtrap.inference import FitError
 from blurtrap.inference import _calibrate as cal_mod
 from blurtrap.inference import _posterior as post_mod
+from blurtrap.inference import _posterior_priors as prior_mod
 
 KT = 1.380649e-23 * 295.0
 GAMMA = 6 * math.pi * 9.3e-4 * 1.53e-6
@@ -74,11 +76,11 @@ def test_diagnose_unknown_candidates_are_refused(rec, monkeypatch, cands, fn):
 
 
 def test_diagnose_valid_candidates_pass_the_check():
-    assert diag_mod._check_candidates(["drift", "drift", "anharmonicity"]) == [
+    assert cand_mod._check_candidates(["drift", "drift", "anharmonicity"]) == [
         "drift", "anharmonicity"]
-    assert diag_mod._check_candidates("line_noise") == ["line_noise"]
-    assert diag_mod._check_candidates(None) is None
-    assert diag_mod._check_alpha(0.01) == 0.01
+    assert cand_mod._check_candidates("line_noise") == ["line_noise"]
+    assert cand_mod._check_candidates(None) is None
+    assert cand_mod._check_alpha(0.01) == 0.01
 
 
 # ------------------------------------------------------------------------------------------
@@ -153,7 +155,7 @@ def test_user_prior_with_unknown_name_or_vector_output(rec, monkeypatch):
 
 def test_traceable_user_priors_pass_the_check():
     names = ("k", "gamma", "tracking_var")
-    post_mod._check_user_priors(
+    prior_mod._check_user_priors(
         (lambda p: jnp.log(p["k"]), lambda p: jnp.where(p["k"] > 1e-5, 0.0, -10.0),
          lambda p: 0.0), names)
 

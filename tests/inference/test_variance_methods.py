@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import blurtrap as bt
-from blurtrap._demo import DemoConfig, simulate_experiment
+from blurtrap._demo_experiment import DemoConfig, simulate_experiment
 from blurtrap.inference import _calibrate, _variance
 from blurtrap.inference._problems import make_layout, rec_meta
 

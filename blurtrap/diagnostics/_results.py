@@ -1,0 +1,115 @@
+"""The results of :func:`diagnose` and :func:`select_model`: :class:`Candidate` (one tried
+effect), :class:`Diagnosis` (adequacy, goodness of fit, ranking) and :class:`Selection`."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ..inference._result import CalibrationResult
+
+
+@dataclasses.dataclass(frozen=True, repr=False)
+class Candidate:
+    """A candidate missing effect. ``delta_loglik`` = log-likelihood gain when it is added,
+    ``delta_aic`` = AIC(model) - AIC(model + effect): positive means the effect improves the
+    fit after paying for its parameters."""
+
+    effect: str
+    delta_loglik: float | None
+    dof: int
+    p_value: float
+    delta_aic: float | None
+    evidence: str
+    significant: bool = False
+    fit: CalibrationResult | None = None
+    model: object = None  # the TrapModel with this effect added (likelihood effects only)
+    plausible: bool = True  # False: the refit needs physically impossible parameters
+
+    def __repr__(self) -> str:
+        da = "n/a" if self.delta_aic is None else f"{self.delta_aic:.2f}"
+        flags = ("significant" if self.significant else "not significant") + (
+            "" if self.plausible else ", IMPLAUSIBLE")
+        return (f"Candidate({self.effect!r}, dAIC = {da}, p = {self.p_value:.3g}, {flags}: "
+                f"{self.evidence})")
+
+    def to_dict(self):
+        return {"effect": self.effect, "delta_loglik": self.delta_loglik, "dof": self.dof,
+                "p_value": self.p_value, "delta_aic": self.delta_aic,
+                "significant": self.significant, "plausible": self.plausible,
+                "evidence": self.evidence}
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`: adequacy, goodness of fit and ranked candidate effects."""
+
+    model: str
+    fit: CalibrationResult
+    gof: dict
+    adequate: bool
+    ranking: tuple[Candidate, ...]
+    threshold: float
+    notes: tuple[str, ...] = ()
+
+    @property
+    def best(self) -> Candidate | None:
+        return self.ranking[0] if self.ranking and self.ranking[0].significant else None
+
+    def to_dict(self) -> dict:
+        return {"model": self.model, "adequate": self.adequate, "gof": dict(self.gof),
+                "threshold": self.threshold,
+                "ranking": [c.to_dict() for c in self.ranking], "notes": list(self.notes),
+                "fit": self.fit.to_dict()}
+
+    def summary(self) -> str:
+        g = self.gof
+        lines = [f"model: {self.model}   goodness of fit: statistic = {g['statistic']:.4g}, "
+                 f"dof = {g['dof']}, p = {g['p_value']:.3g}"]
+        if self.adequate:
+            lines.append("The model is adequate: no candidate effect improves the fit "
+                         f"significantly (Bonferroni threshold p < {self.threshold:.3g}).")
+        else:
+            lines.append("The model is NOT adequate.")
+        for c in self.ranking:
+            mark = "*" if c.significant else " "
+            dl = "n/a" if c.delta_loglik is None else f"{c.delta_loglik:10.2f}"
+            da = "n/a" if c.delta_aic is None else f"{c.delta_aic:10.2f}"
+            lines.append(f" {mark} {c.effect:<16s} dlogL = {dl}  dAIC = {da}  "
+                         f"p = {c.p_value:.3g}  {c.evidence}")
+        lines.extend(f"note: {n}" for n in self.notes)
+        return "\n".join(lines)
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """Result of :func:`select_model`: the model reached, whether it is adequate, and the
+    diagnosis of every step (``steps[0]`` is the starting model)."""
+
+    model: object
+    adequate: bool
+    steps: tuple[Diagnosis, ...]
+    added: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def fit(self) -> CalibrationResult:
+        """Fit of the final model (the last diagnosis's base fit)."""
+        return self.steps[-1].fit
+
+    def to_dict(self) -> dict:
+        return {"model": self.steps[-1].model, "adequate": self.adequate,
+                "added": list(self.added), "notes": list(self.notes),
+                "steps": [d.to_dict() for d in self.steps]}
+
+    def summary(self) -> str:
+        lines = []
+        for i, d in enumerate(self.steps):
+            best = d.best
+            what = ("adequate" if d.adequate else
+                    f"adds {best.effect} (dAIC {best.delta_aic:.1f}, p {best.p_value:.2g})"
+                    if best is not None and best.delta_aic is not None else "inadequate")
+            lines.append(f"step {i}: {d.model:<40s} gof p = {d.gof['p_value']:.3g}  {what}")
+        lines.append(f"final model: {self.steps[-1].model} "
+                     f"({'adequate' if self.adequate else 'NOT adequate'})")
+        lines.extend(f"note: {n}" for n in self.notes)
+        return "\n".join(lines)
