@@ -244,13 +244,14 @@ def effect_start(name: str, recs, gamma: float) -> float:
     fs = float(np.median([1.0 / float(r.frame_interval) for r in recs]))
     powers = [float(r.laser_power) for r in recs if r.laser_power is not None]
     temp = float(np.median([float(r.temperature) for r in recs]))
+    from ..physics import water_viscosity
     table = {
         "drift_diffusion": 0.01 * c0 / dur,
         "line_amplitude": 0.1 * math.sqrt(c0),
         "rise_fraction": 0.1,
         "f3db": min(0.25 * fs, 8000.0),
         "diode_alpha": 0.3,
-        "hydro_radius": gamma / (6 * math.pi * 2.414e-5 * 10 ** (247.8 / (temp - 140.0))),
+        "hydro_radius": gamma / (6 * math.pi * float(water_viscosity(np.clip(temp, 274, 373)))),
         "power_offset": 0.05 * min(powers) if powers else 1e-3,
         "heating": 10.0,
     }

@@ -32,7 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._config import x64_context
+from .._config import float64_scope, x64_context
+from ..physics import faxen_factor, stokes_friction, water_viscosity
 
 # Wide physical bounds of the default priors (SI), core and effect parameters: log-uniform,
 # except ``tracking_var`` (uniform on [0, 1e-10] m^2; see :class:`Uniform`).
@@ -173,23 +174,15 @@ class InverseGamma(Prior):
 # ------------------------------------------------------------------------------------------
 # physics-based priors
 # ------------------------------------------------------------------------------------------
-def water_viscosity(temperature):
-    """Viscosity of water [Pa s] at ``temperature`` [K] (Vogel form
-    ``eta = 2.414e-5 * 10^(247.8 / (T - 140))``; within ~2.5 % over 273-370 K)."""
-    return 2.414e-5 * 10.0 ** (247.8 / (temperature - 140.0))
+# water_viscosity (IAPWS 2008 at 0.1 MPa) and faxen_factor (parallel to a wall) are
+# blurtrap.physics's, imported above; the names stay importable from here.
 
 
-def faxen_factor(radius, height):
-    """Faxen's parallel correction ``gamma(h) / gamma_Stokes`` for a sphere of ``radius``
-    [m] whose centre is at ``height`` [m] above a plane wall:
-    ``1 / (1 - 9/16 x + 1/8 x^3 - 45/256 x^4 - 1/16 x^5)``, ``x = r/h``."""
-    x = radius / height
-    return 1.0 / (1.0 - 9.0 / 16.0 * x + x**3 / 8.0 - 45.0 / 256.0 * x**4 - x**5 / 16.0)
-
-
+@float64_scope
 def stokes_gamma(radius, viscosity, height=None):
-    """Stokes friction ``6 pi eta r`` [N s/m], times Faxen's factor when ``height`` is given."""
-    g = 6.0 * math.pi * viscosity * radius
+    """Stokes friction ``6 pi eta r`` [N s/m], times Faxen's factor when ``height`` is given
+    (``blurtrap.physics.stokes_friction`` and ``faxen_factor``, in float64)."""
+    g = stokes_friction(radius, viscosity)
     if height is not None:
         g = g * faxen_factor(radius, height)
     return g
@@ -231,8 +224,6 @@ def stokes_gamma_prior(
     if viscosity is None:
         if temperature is None:
             raise ValueError("give the viscosity [Pa s] or the temperature [K] (water)")
-        if not temperature > 140.0:
-            raise ValueError(f"temperature must be in K (> 140 K); got {temperature!r}")
     elif not viscosity > 0:
         raise ValueError(f"viscosity must be > 0 [Pa s]; got {viscosity!r}")
     if height is not None and not height > radius:
@@ -244,7 +235,7 @@ def stokes_gamma_prior(
     def gamma_of(x):
         r, eta_or_t, h = x
         eta = water_viscosity(eta_or_t) if viscosity is None else eta_or_t
-        g = 6.0 * jnp.pi * eta * r
+        g = stokes_friction(r, eta)
         if height is not None:
             g = g * faxen_factor(r, h)
         return g

@@ -18,6 +18,18 @@ from ._blur import (
 )
 from ._constants import BOLTZMANN as BOLTZMANN
 from ._constants import DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE
+from ._hydro import POLYSTYRENE_DENSITY as POLYSTYRENE_DENSITY
+from ._hydro import WATER_TEMPERATURE_RANGE as WATER_TEMPERATURE_RANGE
+from ._hydro import brenner_factor as brenner_factor
+from ._hydro import complex_friction as complex_friction
+from ._hydro import faxen_factor as faxen_factor
+from ._hydro import hydro_lorentzian as hydro_lorentzian
+from ._hydro import hydro_psd as hydro_psd
+from ._hydro import iapws_viscosity as iapws_viscosity
+from ._hydro import stokes_friction as stokes_friction
+from ._hydro import viscous_frequency as viscous_frequency
+from ._hydro import water_density as water_density
+from ._hydro import water_viscosity as water_viscosity
 from ._kernels import (
     AbstractKernel as AbstractKernel,
 )

@@ -9,15 +9,9 @@ All spectra are two-sided; discrete ones integrate to the variance over (-fs/2, 
   power A^2/2 (split between +-f0).
 - ``photodiode_transfer``: Berg-Sorensen et al. (2003) filter of a silicon photodiode,
   ``|H|^2 = a^2 + (1 - a^2) / (1 + (f/f_3dB)^2)``.
-- ``hydro_lorentzian``: frequency-dependent Stokes friction (Berg-Sorensen & Flyvbjerg 2004,
-  eq. 12) for a sphere of radius R: with ``f_nu = nu/(pi R^2)`` and
-  ``f_m = gamma0/(2 pi m*)``, ``m* = m_bead + 2/3 pi rho_fluid R^3``,
-  ``P(f) = D/(2 pi^2) (1 + sqrt(f/f_nu)) / ((f_c - f^(3/2)/sqrt(f_nu) - f^2/f_m)^2
-  + (f + f^(3/2)/sqrt(f_nu))^2)``.
-- ``faxen_factor``: Faxen's law for motion parallel to a wall at height h (centre),
-  ``gamma/gamma_0 = 1 / (1 - 9/16 x + 1/8 x^3 - 45/256 x^4 - 1/16 x^5)``, x = R/h.
-- ``water_viscosity``: Vogel-type fit to the IAPWS data (0-100 C, ~1 %):
-  ``eta(T) = 2.414e-5 * 10^(247.8/(T - 140))`` Pa s.
+- ``hydro_lorentzian``, ``faxen_factor``, ``water_viscosity``: hydrodynamics and water,
+  written once in ``blurtrap.physics._hydro`` and re-exported here under their old names
+  (``water_viscosity`` is now the IAPWS 2008 formulation, not the former Vogel fit).
 - ``fold_sum``: aliasing of a continuous PSD with an exact 1/f^2 tail:
   ``sum_n P(f + n fs) = sum_{|n|<=N} P(f + n fs) + A [pi^2/(fs^2 sin^2(pi f/fs)) -
   sum_{|n|<=N} 1/(f + n fs)^2]`` where ``A = lim f^2 P(f)``.
@@ -26,6 +20,10 @@ All spectra are two-sided; discrete ones integrate to the variance over (-fs/2, 
 from __future__ import annotations
 
 import jax.numpy as jnp
+
+from ._hydro import faxen_factor as faxen_factor
+from ._hydro import hydro_lorentzian as hydro_lorentzian
+from ._hydro import water_viscosity as water_viscosity
 
 
 def drift_psd(f, frame_interval, drift_diffusion):
@@ -44,26 +42,6 @@ def line_psd(f, line_frequency, line_amplitude, line_width):
 def photodiode_transfer(f, f3db, alpha):
     """Berg-Sorensen photodiode filter ``|H(f)|^2`` (alpha = fraction of fast response)."""
     return alpha**2 + (1.0 - alpha**2) / (1.0 + (f / f3db) ** 2)
-
-
-def hydro_lorentzian(f, diffusion, corner_frequency, f_nu, f_m):
-    """BS&F 2004 hydrodynamically correct two-sided PSD of the true position [m^2/Hz]."""
-    af = jnp.abs(f)
-    r = jnp.sqrt(af / f_nu)
-    re = corner_frequency - af * r - af * af / f_m
-    im = af + af * r
-    return diffusion / (2.0 * jnp.pi**2) * (1.0 + r) / (re * re + im * im)
-
-
-def faxen_factor(radius, height):
-    """gamma(h)/gamma_bulk for motion parallel to a surface (Faxen)."""
-    x = radius / height
-    return 1.0 / (1.0 - 9.0 / 16.0 * x + x**3 / 8.0 - 45.0 / 256.0 * x**4 - x**5 / 16.0)
-
-
-def water_viscosity(temperature):
-    """Viscosity of water [Pa s] at temperature [K] (Vogel fit, ~1 % over 273-373 K)."""
-    return 2.414e-5 * 10.0 ** (247.8 / (temperature - 140.0))
 
 
 def fold_sum(psd_fn, f, fs, n_alias: int, tail_coeff=0.0):

@@ -108,7 +108,8 @@ def test_stokes_gamma_prior_and_faxen():
     # from temperature via water viscosity (~0.95 mPa s at 295 K)
     prt = stokes_gamma_prior(r, 0.02e-6, temperature=295.0, temperature_err=0.5)
     assert 0.9e-3 < water_viscosity(295.0) < 1.0e-3
-    assert float(prt.mean) == pytest.approx(6 * math.pi * water_viscosity(295.0) * r, rel=1e-12)
+    assert float(prt.mean) == pytest.approx(6 * math.pi * float(water_viscosity(295.0)) * r,
+                                            rel=1e-12)
     with pytest.raises(ValueError, match="exceed the radius"):
         stokes_gamma_prior(r, 0.02e-6, viscosity=eta, height=0.5 * r)
     with pytest.raises(ValueError, match="viscosity"):
