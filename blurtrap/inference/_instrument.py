@@ -94,7 +94,7 @@ def _detector_model(st, detector, anti_aliasing, notes) -> TrapModel:
 
 def _stokes_gamma(recs, sts):
     """(gamma, se) of the known bead for every recording (Stokes x Faxen); one value."""
-    from ..physics._effects import water_viscosity
+    from ..physics import faxen_factor, water_viscosity
 
     out = []
     for i, (r, st) in enumerate(zip(recs, sts)):
@@ -107,12 +107,7 @@ def _stokes_gamma(recs, sts):
         def gamma_of(radius, eta_given, temperature, st=st):
             eta = eta_given if eta_given is not None else float(water_viscosity(temperature))
             h = st["distance_to_surface_m"]
-            if h is None:
-                fax = 1.0
-            else:
-                from ..physics import faxen_factor
-
-                fax = float(faxen_factor(radius, h))
+            fax = 1.0 if h is None else float(faxen_factor(radius, h))
             return 6.0 * math.pi * eta * radius * fax
 
         eta0 = st["viscosity_Pa_s"]
