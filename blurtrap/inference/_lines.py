@@ -204,8 +204,9 @@ def find_lines(positions, frame_interval, *, p_value: float = 1e-6, known=(), ma
     - `p_value`: family-wise false-alarm probability per record (Bonferroni over the tested
       ordinates: Fourier bins j = 2 .. N/2 without the Nyquist bin, and the ordinates half-way
       between them). The default 1e-6 needs an ordinate about 25-33 times the local spectrum
-      (N = 1e4 .. 1e6): a line of that strength exactly on a bin is found in about half the
-      records, one of 40x in 95 % (on or between bins; benchmarks/RESULTS_active.md).
+      (N = 1e4 .. 1e6). At N = 4096 (benchmarks/RESULTS_active.md) a line whose on-bin ordinate
+      would be 30x the local spectrum is found in 60-70 % of records, 40x in 89-97 % and 60x in
+      99-100 %, wherever it falls between bins.
     - `known`: frequencies [Hz] known to carry a line (a stage drive, mains): always modelled,
       refined within +-1 bin, reported with an unadjusted p-value and ``known=True``.
     - `max_lines`: the most lines to search for besides the known ones.
