@@ -36,9 +36,7 @@ def ou_frames(k, gamma, dt, exposure, n, n_rec, rng, substeps=4):
 
 def min_adjusted_p(x, dt):
     """Smallest Bonferroni-adjusted p-value of each record (the scan find_lines runs)."""
-    _, power = _lines.periodogram(x, dt)
-    adj, _, _ = _lines._scan(power, x.shape[-1], 0.5)
-    return adj.min(axis=-1)
+    return _lines._scan(x, dt, 0.5)[1].min(axis=-1)
 
 
 # ------------------------------------------------------------------ (a) no false lines
