@@ -36,17 +36,18 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 
+from ..physics import (
+    POLYSTYRENE_DENSITY,
+    hydro_lorentzian,
+    water_density,
+    water_viscosity,
+)
 from ..physics._constants import BOLTZMANN
 from ..physics._effects import (
     drift_psd,
-    hydro_lorentzian,
     line_psd,
     photodiode_transfer,
-    water_viscosity,
 )
-
-RHO_WATER = 997.0  # kg/m^3
-RHO_POLYSTYRENE = 1050.0  # kg/m^3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,11 +238,17 @@ class DetectorFilter(AbstractEffect):
 
 class Hydrodynamics(AbstractEffect):
     """Frequency-dependent friction of a sphere of hydrodynamic radius ``hydro_radius`` [m]
-    (Berg-Sorensen & Flyvbjerg 2004, eq. 12; fluid inertia + Basset force, water viscosity at
-    T, polystyrene bead). Faxen's law near a surface only rescales gamma (which stays free), so
-    a physical fit has ``hydro_radius <= gamma/(6 pi eta)``; ``diagnose`` rejects candidates
-    that violate it by more than 50 %. Simulate it with ``blurtrap.simulate.HydrodynamicFriction``
+    (Berg-Sorensen & Flyvbjerg 2004, eq. 12; fluid inertia + Basset force; water viscosity and
+    density at T, ``blurtrap.physics.water_viscosity`` / ``water_density``). Faxen's law near a
+    surface rescales gamma (which stays free: ``gamma`` is the zero-frequency friction), so a
+    physical fit has ``hydro_radius <= gamma/(6 pi eta)``; ``diagnose`` rejects candidates that
+    violate it by more than 50 %. Simulate it with ``blurtrap.simulate.HydrodynamicFriction``
     (``method="spectral"``).
+
+    Static options: ``distance`` [m] from the bead centre to a surface (default ``None``:
+    bulk); with it the frequency dependence is that of Tolic-Norrelykke et al. (2006), eq. D6
+    (``blurtrap.physics.complex_friction``), meant for ``distance >~ 1.5 hydro_radius``.
+    ``bead_density`` [kg/m^3] (default polystyrene, 1050).
 
     Signature: relative to the best Lorentzian a high-frequency deficit growing like
     sqrt(f/f_nu), f_nu = nu/(pi R^2) (~130 kHz for R = 1.5 um). Not visible in camera data.
@@ -262,17 +269,34 @@ class Hydrodynamics(AbstractEffect):
     params: ClassVar = (Param("hydro_radius", "m", 1e6, "um", "hydrodynamic radius"),)
     signature: ClassVar[str] = "small high-frequency excess over the Lorentzian"
 
+    distance: float | None = eqx.field(static=True, default=None)
+    bead_density: float = eqx.field(static=True, default=POLYSTYRENE_DENSITY)
+
+    def __check_init__(self):
+        checks = [("bead_density", self.bead_density, "kg/m^3")]
+        if self.distance is not None:
+            checks.append(("distance", self.distance, "m (or None: bulk)"))
+        for nm, v, unit in checks:
+            try:
+                ok = not isinstance(v, bool) and 0 < float(v) < float("inf")
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise ValueError(f"{nm} must be a finite number > 0 {unit}; got {nm} = {v!r}")
+
     def lorentzian(self, f, sigma2, tau, temp, extras):
         radius = extras["hydro_radius"]
         eta = water_viscosity(temp)
+        rho = water_density(temp)
         k = BOLTZMANN * temp / sigma2
         gamma = tau * k
         d = BOLTZMANN * temp / gamma
         fc = k / (2.0 * jnp.pi * gamma)
-        f_nu = eta / RHO_WATER / (jnp.pi * radius**2)
-        m_star = (4.0 / 3.0 * RHO_POLYSTYRENE + 2.0 / 3.0 * RHO_WATER) * jnp.pi * radius**3
+        f_nu = eta / rho / (jnp.pi * radius**2)
+        m_star = (4.0 / 3.0 * self.bead_density + 2.0 / 3.0 * rho) * jnp.pi * radius**3
         f_m = gamma / (2.0 * jnp.pi * m_star)
-        return hydro_lorentzian(f, d, fc, f_nu, f_m)
+        x = 0.0 if self.distance is None else radius / self.distance
+        return hydro_lorentzian(f, d, fc, f_nu, f_m, x)
 
 
 class PowerOffset(AbstractEffect):

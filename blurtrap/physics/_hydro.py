@@ -303,6 +303,11 @@ def hydro_lorentzian(f, diffusion, corner_frequency, f_nu, f_m,
       is the added mass of a sphere).
     - `radius_over_distance`: ``R/h`` in [0, 1); 0 (default) is bulk. The wall enters only
       through the shape of ``g(f)``; its size at f = 0 is whatever ``gamma`` holds.
+
+    This is eq. D2 exactly when ``gamma = 6 pi eta R / (1 - 9R/(16h))`` (the zero-frequency
+    limit of eq. D6). For any other ``gamma`` (a free fit parameter) the friction ``h``
+    scales with ``gamma`` and the bulk entrained mass ``m_fluid/2`` (in ``f_m``) does not,
+    as in the bulk formula.
     """
     af = jnp.abs(f)
     s = _sqrt_ratio(af, f_nu)
@@ -326,8 +331,9 @@ def hydro_psd(f, k, gamma, radius, temperature=DEFAULT_TEMPERATURE, *, viscosity
     **Arguments:**
 
     - `f` [Hz]; `k` [N/m]; `gamma` [N s/m]: the zero-frequency friction where the bead is
-      (e.g. ``stokes_friction(R, eta) * faxen_factor(R, h)``); `radius` R [m];
-      `temperature` [K].
+      (e.g. ``stokes_friction(R, eta) * faxen_factor(R, h)``; with
+      ``stokes_friction(R, eta) / (1 - 9R/(16h))`` this is eq. D2 exactly, see
+      :func:`hydro_lorentzian`); `radius` R [m]; `temperature` [K].
     - `viscosity` [Pa s] and `fluid_density` [kg/m^3]: ``None`` for water at `temperature`
       (:func:`water_viscosity`, :func:`water_density`).
     - `bead_density` [kg/m^3] (default polystyrene, :data:`POLYSTYRENE_DENSITY`).

@@ -28,6 +28,8 @@ import jax.random as jr
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..physics import POLYSTYRENE_DENSITY
+
 
 def _nonneg(name, value, unit):
     arr = np.asarray(value, dtype=np.float64)
@@ -187,33 +189,46 @@ class HydrodynamicFriction(eqx.Module):
     $$P(f) = \frac{D}{2\pi^2}\,\frac{1 + \sqrt{f/f_\nu}}
       {(f_c - f^{3/2}/\sqrt{f_\nu} - f^2/f_m)^2 + (f + f^{3/2}/\sqrt{f_\nu})^2},\quad
       f_m = \frac{\gamma_0}{2\pi m^*},\ m^* = \tfrac{4}{3}\pi R^3(\rho_b + \rho_f/2).$$
+    Near a surface (``distance``) the frequency dependence is that of Tolic-Norrelykke et al.,
+    Rev. Sci. Instrum. 77, 103101 (2006), eq. D6 (``blurtrap.physics.hydro_lorentzian``).
 
     ``gamma`` passed to :func:`simulate` is the zero-frequency friction gamma_0 (include
     Faxen's wall correction there, e.g. ``gamma = 6 pi eta R * faxen_factor(R, h)``); the
-    radius sets only the frequency dependence. Needs ``method="spectral"`` (no Markovian
-    simulation exists in the position alone).
+    radius (and the distance) set only the frequency dependence. Needs ``method="spectral"``
+    (no Markovian simulation exists in the position alone).
 
     - `radius`: bead radius R [m], > 0.
     - `viscosity`: fluid viscosity eta [Pa s] or ``None`` (water at the simulation
-      temperature, ``blurtrap.physics`` Vogel fit).
-    - `fluid_density`, `bead_density`: [kg/m^3] (defaults: water 997, polystyrene 1050).
+      temperature, ``blurtrap.physics.water_viscosity``, IAPWS 2008).
+    - `fluid_density`: [kg/m^3] or ``None`` (water at the simulation temperature,
+      ``blurtrap.physics.water_density``); `bead_density`: [kg/m^3] (default polystyrene,
+      1050).
+    - `distance`: bead centre to the surface [m], > radius, or ``None`` (bulk, the default).
     """
 
     radius: float = eqx.field(static=True)
     viscosity: float | None = eqx.field(static=True)
-    fluid_density: float = eqx.field(static=True)
+    fluid_density: float | None = eqx.field(static=True)
     bead_density: float = eqx.field(static=True)
+    distance: float | None = eqx.field(static=True)
     name = "hydrodynamics"
 
-    def __init__(self, radius, viscosity=None, fluid_density=997.0, bead_density=1050.0):
-        for nm, v, unit in (("radius", radius, "m"), ("fluid_density", fluid_density, "kg/m^3"),
-                            ("bead_density", bead_density, "kg/m^3")):
+    def __init__(self, radius, viscosity=None, fluid_density=None,
+                 bead_density=POLYSTYRENE_DENSITY, distance=None):
+        for nm, v, unit in (("radius", radius, "m"), ("bead_density", bead_density, "kg/m^3")):
             if not (np.isfinite(float(v)) and float(v) > 0):
                 raise ValueError(f"{nm} must be finite and > 0 {unit}; got {nm} = {v!r} {unit}")
-        if viscosity is not None and not (np.isfinite(float(viscosity)) and float(viscosity) > 0):
-            raise ValueError(f"viscosity must be finite and > 0 Pa s (or None for water); got "
-                             f"viscosity = {viscosity!r} Pa s")
+        for nm, v, unit, what in (("viscosity", viscosity, "Pa s", "water"),
+                                  ("fluid_density", fluid_density, "kg/m^3", "water"),
+                                  ("distance", distance, "m", "bulk")):
+            if v is not None and not (np.isfinite(float(v)) and float(v) > 0):
+                raise ValueError(f"{nm} must be finite and > 0 {unit} (or None for {what}); "
+                                 f"got {nm} = {v!r} {unit}")
+        if distance is not None and not float(distance) > float(radius):
+            raise ValueError(f"distance (bead centre to surface) must exceed the radius; got "
+                             f"distance = {distance!r} m with radius = {radius!r} m")
         self.radius = float(radius)
         self.viscosity = None if viscosity is None else float(viscosity)
-        self.fluid_density = float(fluid_density)
+        self.fluid_density = None if fluid_density is None else float(fluid_density)
         self.bead_density = float(bead_density)
+        self.distance = None if distance is None else float(distance)

@@ -202,7 +202,7 @@ def _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau, n, n_tr
                     k_init, k_frames):
     """Frames (G, T, n) in units of sigma from the exact photodiode system or the spectral
     sampler (dimensionless: times in tau, frequencies in 1/tau)."""
-    from ..physics._effects import water_viscosity
+    from ..physics import water_density, water_viscosity
 
     g_n = kf.shape[0]
     if method == "exact_frames":  # photodiode filter, exact joint linear system
@@ -217,10 +217,14 @@ def _special_frames(method, photodiode, hydro, kf, gf, dtf, tf, wf, tau, n, n_tr
     if hydro is not None:
         eta = (np.asarray(water_viscosity(tf), dtype=np.float64) if hydro.viscosity is None
                else np.full(g_n, hydro.viscosity))
+        rho = (np.asarray(water_density(tf), dtype=np.float64) if hydro.fluid_density is None
+               else np.full(g_n, hydro.fluid_density))
         r = hydro.radius
-        m_star = 4.0 / 3.0 * np.pi * r**3 * (hydro.bead_density + 0.5 * hydro.fluid_density)
-        p["f_nu"] = eta / (hydro.fluid_density * np.pi * r**2) * tau
+        m_star = 4.0 / 3.0 * np.pi * r**3 * (hydro.bead_density + 0.5 * rho)
+        p["f_nu"] = eta / (rho * np.pi * r**2) * tau
         p["f_m"] = gf / (2.0 * np.pi * m_star) * tau
+        if hydro.distance is not None:
+            p["x_wall"] = np.full(g_n, r / hydro.distance)
     return simulate_spectral(p, dtf / tau, n, n_traces, dtype, k_frames)
 
 

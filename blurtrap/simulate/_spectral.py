@@ -45,11 +45,12 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
 def continuous_psd(f, p):
     """Continuous two-sided PSD of the detected position (units sigma^2 tau), times the
     detection transfer. `p`: dict of dimensionless scalars ``w`` (exposure / tau), and
-    optionally ``f_nu``, ``f_m`` (hydrodynamics, times tau) and ``f3db``, ``alpha``
-    (photodiode, f3db times tau)."""
+    optionally ``f_nu``, ``f_m`` (hydrodynamics, times tau; ``x_wall`` = radius / distance
+    to a surface, absent in bulk) and ``f3db``, ``alpha`` (photodiode, f3db times tau)."""
     if "f_nu" in p:
         # D = 1, fc = 1/(2 pi) in units of sigma and tau
-        lor = hydro_lorentzian(f, 1.0, 1.0 / (2.0 * jnp.pi), p["f_nu"], p["f_m"])
+        lor = hydro_lorentzian(f, 1.0, 1.0 / (2.0 * jnp.pi), p["f_nu"], p["f_m"],
+                               p.get("x_wall", 0.0))
     else:
         lor = 2.0 / (1.0 + (2.0 * jnp.pi * f) ** 2)
     out = lor * jnp.sinc(f * p["w"]) ** 2

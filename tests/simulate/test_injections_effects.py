@@ -21,12 +21,14 @@ def water_eta(temp):
     return 2.414e-5 * 10.0 ** (247.8 / (temp - 140.0))
 
 
-def ref_continuous_psd(f, k, gamma, w, radius=None, f3db=None, alpha=None, temp=T):
+def ref_continuous_psd(f, k, gamma, w, radius=None, f3db=None, alpha=None, temp=T, wall=None):
     """Two-sided PSD [m^2/Hz] of the detected position: response function of
     m x'' = -k x - gamma(f) x' + noise with the fluctuation-dissipation theorem,
     P = 2 kT Re gamma(f) / |k - m w^2 - i w gamma(f)|^2, times sinc^2(f W) |H(f)|^2, with the
     oscillating-sphere friction gamma(f) = gamma0 (1 + (1 - i) sqrt(f/f_nu) - (2i/9) f/f_nu)
-    (Stokes + Basset + half the displaced fluid's mass; Landau & Lifshitz section 24)."""
+    (Stokes + Basset + half the displaced fluid's mass; Landau & Lifshitz section 24); with
+    ``wall`` (bead centre to a surface) divided by Tolic-Norrelykke et al.'s (2006, eq. D6)
+    denominator (then gamma(0) = gamma0 / (1 - 9 R / (16 wall)))."""
     f = np.asarray(f, dtype=float)
     om = 2 * np.pi * f
     kt = BOLTZMANN * temp
@@ -38,6 +40,12 @@ def ref_continuous_psd(f, k, gamma, w, radius=None, f3db=None, alpha=None, temp=
         f_nu = eta / (rho_f * np.pi * radius**2)
         x = f / f_nu  # gamma(-f) = conj(gamma(f)): the friction kernel is real in time
         gam = gamma * (1 + (1 - 1j * np.sign(f)) * np.sqrt(np.abs(x)) - 2j / 9 * x)
+        if wall is not None:
+            c, s = 9 / 16 * radius / wall, np.sqrt(np.abs(x))
+            eps = (2 * wall - radius) / radius * s
+            den = 1 - c * (1 - (1 - 1j) / 3 * s + 2j / 9 * np.abs(x)
+                           - 4 / 3 * (1 - np.exp(-(1 - 1j) * eps)))
+            gam = gam / np.where(f < 0, np.conj(den), den)
         mass = 4 / 3 * np.pi * radius**3 * rho_b
     p = 2 * kt * gam.real / np.abs(k - mass * om**2 - 1j * om * gam) ** 2
     p = p * np.sinc(f * w) ** 2
@@ -182,6 +190,29 @@ def test_hydrodynamic_spectrum():
     assert np.all(np.abs(est - ref) < Z * se), (est - ref) / se
 
 
+def test_hydrodynamic_spectrum_near_a_wall():
+    """As above with the bead centre at 2 R from a surface (``distance``; the simulator's gamma
+    is the zero-frequency friction, here Stokes / (1 - 9/32)): band ratios to the wall
+    reference within 4 SE, and many SE from the bulk spectrum with the same zero-frequency
+    friction (the wall lowers the friction at high frequency)."""
+    dt, n, n_tr = 1e-5, 16384, 8
+    gamma = GAMMA / (1 - 9 / 32)
+    inj = HydrodynamicFriction(R, viscosity=water_eta(T), fluid_density=997.0, distance=2 * R)
+    x = np.asarray(simulate(K, gamma, dt, dt, n, key=jax.random.key(12), n_traces=n_tr,
+                            method="spectral", injections=(inj,)))
+    spec = np.abs(np.fft.rfft(x - x.mean(axis=1, keepdims=True), axis=1)[:, 1:-1]) ** 2 * dt / n
+    f = np.arange(1, n // 2) / (n * dt)
+    wall = ref_folded(f, dt, n_alias=100, k=K, gamma=GAMMA, w=dt, radius=R, wall=2 * R)
+    bulk = ref_folded(f, dt, n_alias=100, k=K, gamma=gamma, w=dt, radius=R)
+    sep = []
+    for b in np.array_split(np.arange(f.size), 8)[1:]:
+        se = 1 / np.sqrt(b.size * n_tr)
+        ratio = np.mean(spec[:, b] / wall[b])
+        assert abs(ratio - 1) < Z * se, (f[b[0]], ratio, se)
+        sep.append(abs(np.mean(spec[:, b] / bulk[b]) - 1) / se)
+    assert max(sep) > 10
+
+
 def test_injection_errors():
     with pytest.raises(ValueError, match="f3db must be finite and > 0 Hz"):
         PhotodiodeFilter(-1.0, 0.5)
@@ -189,6 +220,10 @@ def test_injection_errors():
         PhotodiodeFilter(1e3, 1.5)
     with pytest.raises(ValueError, match="radius must be finite and > 0 m"):
         HydrodynamicFriction(0.0)
+    with pytest.raises(ValueError, match="distance .* must exceed the radius"):
+        HydrodynamicFriction(R, distance=0.5 * R)
+    with pytest.raises(ValueError, match="fluid_density must be finite and > 0 kg/m"):
+        HydrodynamicFriction(R, fluid_density=-1.0)
     with pytest.raises(ValueError, match="use method='spectral'"):
         simulate(K, GAMMA, DT, DT, 10, key=jax.random.key(0), method="exact_frames",
                  injections=(HydrodynamicFriction(R),))
