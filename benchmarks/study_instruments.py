@@ -352,8 +352,7 @@ def table(case, c, results):
                              f"{tstr} | |")
                 continue
             f = flag(s)
-            if f and "contrast" not in method and "keep" not in method \
-                    and "pylake" not in method:
+            if f and not any(w in method for w in ("contrast", "control", "keep", "pylake")):
                 flags.append((case, method, q, s, f))
             se_sd = f"{s['se_sd']:.2f}" if "se_sd" in s else "—"
             cov = f"{s['cov']:.0f} ({s['cov_se']:.0f})" if "cov" in s else "—"
@@ -374,13 +373,13 @@ def report(raw, out_dir, command):
           "grid, camera exposure average / oversampled anti-aliasing FIR, stage drive, volts); "
           "fits: `bt.calibrate(Recording(..., metadata=...))` with the instrument settings in "
           "the metadata, defaults otherwise. T = 296.15 K, eta = 0.93 mPa s, R = 0.5 um "
-          "(gamma = %.4g N s/m) unless said. Columns: bias of the estimate relative to the "
+          f"(gamma = {GAMMA:.4g} N s/m) unless said. Columns: bias of the estimate relative to the "
           "truth, its Monte Carlo SE and z = bias / MC SE; SD of the estimates; SE/SD = mean "
-          "reported SE / observed SD (MC uncertainty ~ 1/sqrt(2n), 0.07 at n = 100); 95 %% "
+          "reported SE / observed SD (MC uncertainty ~ 1/sqrt(2n), 0.05 at n = 200); 95 % "
           "Wald coverage = fraction with |est - truth| < 1.96 SE. n = successful fits "
-          "(failures). Flags (bias > 3 MC SE, SE/SD outside 0.8-1.25, coverage < 90 %%) are "
-          "shown for every row; rows that are contrasts (lines='keep', no stated error) and "
-          "peers are not counted as blurtrap problems." % GAMMA, "",
+          "(failures). Flags (bias > 3 MC SE, SE/SD outside 0.8-1.25, coverage < 90 %) are "
+          "shown for every row; rows that are contrasts or controls (lines='keep', no stated "
+          "error, eps^2 held) and peers are not counted as blurtrap problems.", "",
           "pylake 1.8 (`lk.calibrate_force(volts, bead_diameter=1.0 um, temperature=23 C, "
           "viscosity=0.00093, sample_rate=20000, fast_sensor=True, fit_range=(100, 8000), "
           "num_points_per_block=100)`; active adds `active_calibration=True, "
