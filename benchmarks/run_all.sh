@@ -89,7 +89,7 @@ else
         "study_diagnose.py --out $OUT"
         "study_robustness.py --seeds 3 --out $OUT/robustness.json"
         "study_whittle_leakage.py"
-        "study_instruments.py --seeds 100 --out $OUT --data $OUT/instruments_data --raw $OUT/instruments_raw.json"
+        "study_instruments.py --seeds 200 --out $OUT --data $OUT/instruments_data --raw $OUT/instruments_raw.json"
     )
 fi
 
