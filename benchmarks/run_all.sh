@@ -59,6 +59,7 @@ if [ "$MODE" = smoke ]; then
         "study_diagnose.py --seeds 1 --effect-seeds 1 --weak-seeds 1 --power-seeds 1 --out $OUT"
         "study_robustness.py --smoke --out $OUT/robustness.json"
         "study_whittle_leakage.py --seeds 2 --ratios 30 1000 --frames 8192"
+        "study_instruments.py --seeds 3 --chunk 3 --out $OUT --data $OUT/instruments_data --raw $OUT/instruments_raw.json"
     )
 elif [ "$MODE" = quick ]; then
     RUNS=(
@@ -73,6 +74,7 @@ elif [ "$MODE" = quick ]; then
         "study_diagnose.py --quick --out $OUT"
         "study_robustness.py --out $OUT/robustness.json"
         "study_whittle_leakage.py"
+        "study_instruments.py --seeds 30 --out $OUT --data $OUT/instruments_data --raw $OUT/instruments_raw.json"
     )
 else
     RUNS=(
@@ -87,6 +89,7 @@ else
         "study_diagnose.py --out $OUT"
         "study_robustness.py --seeds 3 --out $OUT/robustness.json"
         "study_whittle_leakage.py"
+        "study_instruments.py --seeds 200 --out $OUT --data $OUT/instruments_data --raw $OUT/instruments_raw.json"
     )
 fi
 
