@@ -35,11 +35,20 @@ import numpy as np
 
 from .._config import float64_scope
 from ..inference._calibrate import _inspect_frames, as_recordings, calibrate
+from ..inference._instrument import default_model
 from ..inference._models import get_model
 from ..inference._result import FitError
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
+from ._detector import detector_note
 from ._evidence import _ADDING, _gof_change, _sensitivity_notes
 from ._results import Candidate, Diagnosis
+
+
+def _common_settings(recs) -> dict:
+    """The first recording's instrument settings (validated for all)."""
+    from ..data import instrument_settings
+
+    return [instrument_settings(r) for r in recs][0]
 
 
 def _k_mode(recs, k):
@@ -126,13 +135,14 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     # saturated or coarsely quantised frames: refused here as by calibrate (the base fit
     # runs with strict=False, which would only note them)
     _inspect_frames(recs, strict=True)
-    mdl = get_model(model)
+    settings = _common_settings(recs)
+    mdl = get_model(model) if model is not None else default_model(settings)
     if add:
         mdl = mdl.add(*add)
     k, multi_power = _k_mode(recs, k)
     notes = []
     base = calibrate(recs, method="likelihood", likelihood="whittle", model=mdl, k=k,
-                     strict=False)
+                     strict=False, lines="keep")
     if not all(np.isfinite(e) for n, e in zip(base.param_names, base.errors)
                if n not in base.at_bounds):
         notes.append("the base model's Fisher information is singular (a parameter is pinned "
@@ -148,5 +158,6 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     gof_ok = base.gof["p_value"] >= threshold
     adequate = gof_ok and not any(c.significant for c in ranked)
     notes += _verdict_notes(gof_ok, adequate, ranked)
+    notes += detector_note(recs, settings)
     return Diagnosis(model=mdl.name, fit=base, gof=base.gof, adequate=adequate,
                      ranking=tuple(ranked), threshold=threshold, notes=tuple(notes))

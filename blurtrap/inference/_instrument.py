@@ -92,6 +92,14 @@ def _detector_model(st, detector, anti_aliasing, notes) -> TrapModel:
     return TrapModel(blur=True, alias=True, noise=True, name="standard")
 
 
+def default_model(settings) -> TrapModel:
+    """The model a recording's detector settings imply (as calibrate without `model`)."""
+    mdl = _detector_model(settings, None, None, [])
+    if settings.get("diode_filter") not in (None, "none"):
+        mdl = mdl.add("detector_filter")
+    return mdl
+
+
 def _stokes_gamma(recs, sts):
     """(gamma, se) of the known bead for every recording (Stokes x Faxen); one value."""
     from ..physics import faxen_factor, water_viscosity
@@ -249,7 +257,8 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
     rng = f_range
     if rng is None and sts[0]["fit_range_Hz"] is not None:
         rng = tuple(_same([tuple(s["fit_range_Hz"] or ()) for s in sts], "fit_range_Hz"))
-    if rng is None and not mdl.alias and method in ("auto", "likelihood", "psd"):
+    aa = anti_aliasing if anti_aliasing is not None else st["anti_aliasing"]
+    if rng is None and aa and not mdl.alias and method in ("auto", "likelihood", "psd"):
         rng = (0.0, AA_BAND * min(1.0 / float(r.frame_interval) for r in recs))
         notes.append(f"fit band 0-{rng[1]:.6g} Hz ({AA_BAND:g} fs: below the instrument's "
                      "anti-alias filter; fit_range_Hz to change it)")
