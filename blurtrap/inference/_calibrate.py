@@ -453,7 +453,7 @@ def _singular_fisher_causes(recs, values, names) -> str:
                       f"s; dt = {dt:.3g} s)" if math.isfinite(tau) else "")
                       + ", so there is little temporal information (use recordings at "
                       "several exposures or powers)")
-    elif math.isfinite(tau) and tau < dt:
+    elif math.isfinite(tau) and tau < dt / 3.0:
         causes.append(f"dt >> tau: the fit puts the relaxation time tau = gamma/k at {tau:.3g} s, "
                       f"shorter than the frame interval {dt:.3g} s, where one recording carries "
                       "too little temporal information for gamma; give the friction "

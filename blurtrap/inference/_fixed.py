@@ -66,16 +66,18 @@ def parse_fixed(fixed, names) -> dict[str, tuple[float, float]]:
         if names is not None and name not in names:
             raise ValueError(f"fixed names parameter {name!r}, which this model does not have; "
                              f"its parameters are {list(names)}")
-        value, se = (spec if isinstance(spec, (tuple, list)) and len(spec) == 2 else (spec, 0.0))
-        for what, v in (("value", value), ("standard error", se)):
+        pair = isinstance(spec, (tuple, list)) and len(spec) == 2
+        value, se = (spec[0], spec[1]) if pair else (spec, 0.0)
+        checks: tuple[tuple[str, Any], ...] = (("value", value), ("standard error", se))
+        for what, v in checks:
             if not (isinstance(v, numbers.Real) and not isinstance(v, bool)
                     and math.isfinite(float(v)) and float(v) >= 0):
                 raise ValueError(f"fixed[{name!r}]: the {what} must be a finite number >= 0 "
                                  f"(SI); got {v!r}")
-        if float(value) == 0 and name != "tracking_var":
+        if float(value) == 0 and name != "tracking_var":  # pyright: ignore[reportArgumentType]
             raise ValueError(f"fixed[{name!r}] = 0: only tracking_var may be held at 0; "
                              "the others are positive")
-        out[name] = (float(value), float(se))
+        out[name] = (float(value), float(se))  # pyright: ignore[reportArgumentType]
     if names is not None and len(out) == len(names):
         raise ValueError(f"fixed holds every parameter {list(names)}: nothing left to fit")
     return out

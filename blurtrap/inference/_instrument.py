@@ -187,6 +187,13 @@ def _clean_lines(recs, sts, lines, notes, excluded):
         if lines == "keep":
             out.append(r)
             continue
+        from ._calibrate import _outliers
+
+        if _outliers(r)[0]:
+            # isolated spikes (even periodic ones) are not sinusoids: subtracting "lines"
+            # would smear them over the trace; the fit's checks name the outliers instead
+            out.append(r)
+            continue
         known = () if f_d is None else (resp.frequency,)
         found = find_lines(x, dt, known=known)
         if not found:

@@ -116,7 +116,7 @@ def fit_psd(frequencies, power, *, frame_interval, exposure, n_blocks=1,
         layout=layout, model=mdl, meta=rec_meta([rec]), f=jnp.asarray(f[None]),
         s2=jnp.asarray(np.sin(np.pi * f * dt)[None] ** 2), power=jnp.asarray(p[None]),
         weight=jnp.asarray(weight[None]), log_ref=jnp.asarray(math.log(float(np.mean(p)))),
-        block_len=jnp.asarray([float(block_frames)]) if use_block else None)
+        block_len=jnp.asarray([float(block_frames or 0)]) if use_block else None)
     vec = _start(f, p, dt, float(temperature), mdl.noise)
     from ._calibrate import _assemble, _check_fit, spectral_gof
 

@@ -686,7 +686,8 @@ def simulate(
     if drives:  # exact steady-state response, blurred over each exposure (_instruments)
         widths = np.broadcast_to(wins[None, :], (G, n_win)) if windows else wf[:, None]
         pos = pos.reshape(G, n_win, n_traces, n_frames) + drive_frames(
-            drives, kf, gf, widths, dtf, n_frames, times if jitter else None, photodiode, dtype)
+            drives, kf, gf, widths, dtf, n_frames, times if jitter else None, photodiode,
+            dtype)  # pyright: ignore[reportOperatorIssue]
     if sens:
         pos = pos / sens[0].rd.astype(dtype)
     if pos.shape != out_shape:
