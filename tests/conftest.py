@@ -24,6 +24,32 @@ os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = str(
     jax.config.jax_persistent_cache_min_compile_time_secs)
 
 
+def _memory_maps() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as fh:
+            return sum(1 for _ in fh)
+    except OSError:  # not Linux: no per-process map limit to watch
+        return 0
+
+
+#: XLA:CPU keeps every compiled program's machine code in its own memory mappings (~6 per
+#: program). A test worker that compiles thousands of distinct programs reaches the kernel's
+#: per-process limit (vm.max_map_count, 65 530 by default) and the next compilation dies with
+#: a segmentation fault inside XLA. Past this many mappings the in-memory compilation caches
+#: are dropped after a test module (programs then come back from the persistent cache).
+MAX_MAPS = 20_000
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _bounded_compiled_programs():
+    yield
+    if _memory_maps() > MAX_MAPS:
+        import gc
+
+        jax.clear_caches()
+        gc.collect()
+
+
 @pytest.fixture
 def rng():
     """A numpy Generator with a fixed, recorded seed (never global RNG state)."""
