@@ -192,21 +192,25 @@ def test_clear_errors_without_recordings_or_friction(rng):
         result_for([rec], [5e-5]).plot(n_blocks=0)
 
 
+def synth(k, n, rng):
+    """Gaussian frames with exactly the standard model's discrete spectrum (circulant
+    synthesis in numpy: no simulator compile)."""
+    from blurtrap.plotting._common import model_psd
+
+    rec0 = bt.Recording(trace(rng, 8), frame_interval=DT, exposure=DT)
+    f = np.fft.rfftfreq(n, DT)
+    f[0] = 1.0
+    p = model_psd({"k": k, "gamma": GAMMA, "tracking_var": EPS2}, rec0, f)
+    z = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2)
+    z[0], z[-1] = 0.0, rng.standard_normal()
+    return np.fft.irfft(np.sqrt(p * n / DT) * z, n)
+
+
 def test_calibrate_keeps_its_inputs_but_json_does_not(rng):
     """A real fit: the result keeps the recording and model it fitted (not serialised), and
     its figure's model line is the fitted model at the fitted parameters."""
-    from blurtrap.plotting._common import model_psd
-
-    gamma = GAMMA
-    rec0 = bt.Recording(trace(rng, 8), frame_interval=DT, exposure=DT)
     n = 4096
-    f = np.fft.rfftfreq(n, DT)
-    f[0] = 1.0
-    p = model_psd({"k": 5e-5, "gamma": gamma, "tracking_var": EPS2}, rec0, f)
-    z = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) / math.sqrt(2)
-    z[0], z[-1] = 0.0, rng.standard_normal()
-    x = np.fft.irfft(np.sqrt(p * n / DT) * z, n)
-    rec = bt.Recording(x, frame_interval=DT, exposure=DT)
+    rec = bt.Recording(synth(5e-5, n, rng), frame_interval=DT, exposure=DT)
     res = bt.calibrate(rec, method="psd", n_blocks=NB)
     assert res.inputs.recordings[0] is rec and res.inputs.model.name == "standard"
     assert "inputs" not in res.to_dict() and "FitInputs" not in str(res.to_dict())
@@ -214,6 +218,26 @@ def test_calibrate_keeps_its_inputs_but_json_does_not(rng):
     ref = expected_block_periodogram(fit.get_xdata(), n // NB, res.k, res.gamma, DT, DT,
                                      res.tracking_var)
     np.testing.assert_allclose(fit.get_ydata(), 2 * ref * 1e18, rtol=1e-8)
+
+
+def test_volts_calibration_draws_metres(rng):
+    """Positions in volts with the bead's Stokes friction: the figures are in nm^2/Hz (data
+    scaled by the fitted Rd^2) and data/model averages 1 (128 ordinates of SD 1/4 each: the
+    mean's SD is 0.022; 4 SD allowed)."""
+    n, rd = 4096, 1e-7
+    x = synth(5e-5, n, rng)
+    rec = bt.Recording(x / rd, frame_interval=DT, exposure=DT, position_unit="V",
+                       metadata={"friction": "stokes", "bead_radius_m": 1.53e-6,
+                                 "viscosity_Pa_s": 0.00093})
+    res = bt.calibrate(rec, method="psd", n_blocks=NB)
+    rd_fit = res["displacement_sensitivity"]
+    assert abs(rd_fit.value - rd) < 4 * rd_fit.error
+    pts = next(ln for ln in res.plot_residuals().axes[0].get_lines()
+               if ln.get_label().startswith("data / model"))
+    f, p = numpy_blocked_psd(x / rd, DT, NB)
+    ref = expected_block_periodogram(f, n // NB, res.k, res.gamma, DT, DT, res.tracking_var)
+    np.testing.assert_allclose(pts.get_ydata(), p * rd_fit.value**2 / ref, rtol=1e-8)
+    assert abs(np.mean(pts.get_ydata()) - 1.0) < 4 * 0.25 / math.sqrt(f.size)
 
 
 def test_every_public_figure_takes_ax_or_fig_and_returns_the_figure():
