@@ -246,19 +246,16 @@ class CalibrationResult:
 
     # ---- output -----------------------------------------------------------------------
     def plot(self, ax=None, *, n_blocks=None):
-        """The fitted recordings' blocked power spectrum (one-sided, nm^2/Hz) with the fitted
-        model and, when that model has blur or aliasing, the naive Lorentzian with the same
-        k and gamma (:func:`blurtrap.plotting.fit_spectrum`; imports matplotlib). Needs the
-        recordings the fit kept (``ValueError`` for a result rebuilt from JSON). Returns the
-        figure."""
+        """Blocked spectrum of the fitted recordings with the fitted model (and the naive
+        Lorentzian where the model blurs or folds): :func:`blurtrap.plotting.fit_spectrum`.
+        Returns the figure; ``ValueError`` for a result rebuilt from JSON (no recordings)."""
         from ..plotting._result_figs import fit_spectrum
 
         return fit_spectrum(self, n_blocks=n_blocks, ax=ax)
 
     def plot_residuals(self, ax=None, *, n_blocks=None):
-        """Data/model ratio of the blocked spectrum against frequency with its expected 68 %
-        and 95 % bands (Gamma quantiles for the block count; :func:`blurtrap.plotting.
-        fit_residuals`; imports matplotlib). Returns the figure."""
+        """Data/model of the blocked spectrum with its expected 68 % and 95 % bands:
+        :func:`blurtrap.plotting.fit_residuals`. Returns the figure."""
         from ..plotting._result_figs import fit_residuals
 
         return fit_residuals(self, n_blocks=n_blocks, ax=ax)
@@ -279,6 +276,15 @@ class CalibrationResult:
         fac, lab_unit = LAB.get(key, (1.0, unit))
         return Parameter(name, value, error, unit, what, value * fac, error * fac, lab_unit,
                          interval if interval is not None else (math.nan, math.nan))
+
+    def __repr__(self) -> str:
+        """Short, without arrays: method, model, each parameter +- SE in lab units."""
+        ps = []
+        for n, v, e in zip(self.param_names, self.values, self.errors, strict=True):
+            fac, unit = LAB.get(n.split("[")[0], (1.0, "SI"))
+            ps.append(f"{n} = {v * fac:.5g} +- {e * fac:.2g} {unit}")
+        return (f"CalibrationResult({self.method}, model {self.model!r}: {'; '.join(ps)}; "
+                f"{self.n_recordings} recording(s), {self.n_frames} frames)")
 
     def _repr_html_(self) -> str:
         """The lab-unit table of :meth:`summary` for notebooks."""

@@ -41,6 +41,16 @@ def test_parameter_by_name_with_units(res):
         res["kappa"]
 
 
+def test_repr_is_short_without_arrays(res):
+    import dataclasses
+
+    big = dataclasses.replace(res, extras={"f": np.linspace(1, 750, 5000)})
+    r = repr(big)
+    assert "array" not in r and len(r) < 300
+    assert "k = 0.05 +- 0.001 pN/nm" in r and "gamma = 0.0274 +- 0.001 pN s/um" in r
+    assert "tracking_var = 4 +- 1 nm^2" in r and "65536 frames" in r
+
+
 def test_html_table_for_notebooks(res):
     html = res._repr_html_()
     assert html.startswith("<pre>") and "pN/nm" in html and "&lt;" not in html[:5]

@@ -137,6 +137,13 @@ def test_unfitted_bands_are_shaded(rng):
     xs = ([span.get_x(), span.get_x() + span.get_width()] if hasattr(span, "get_width")
           else np.asarray(span.get_xy())[:, 0])
     assert (min(xs), max(xs)) == (pytest.approx(100.0), pytest.approx(150.0))
+    fig = result_for([rec], [5e-5], f_range=(10.0, 500.0)).plot_residuals()
+    spans = list(fig.axes[0].patches)  # the shaded bands are the only patches
+    ends = sorted((round(min(x), 6), round(max(x), 6)) for x in (
+        [p.get_x(), p.get_x() + p.get_width()] if hasattr(p, "get_width")
+        else np.asarray(p.get_xy())[:, 0] for p in spans))
+    f, _ = numpy_blocked_psd(rec.positions, DT, NB)
+    assert ends == [(round(f[0], 6), 10.0), (500.0, round(f[-1], 6))]
 
 
 @pytest.mark.parametrize("nb", [1, 2, 7, 128])
