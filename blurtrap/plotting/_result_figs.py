@@ -13,10 +13,11 @@ import numpy as np
 from ._common import NM2, blocked_psd, kT, new_axes
 from ._psd_figs import _plain_log_ticks
 
-#: default block count of the figures for fits that did not use blocks: at most 128 blocks,
-#: at least 64 frames each (what ``calibrate(method="psd")`` uses by default)
-MAX_BLOCKS = 128
-MIN_BLOCK_FRAMES = 64
+#: default block count of the figures for fits that did not use blocks (likelihood, variance,
+#: Allan): at most 32 blocks of at least 512 frames, so that the lowest frequencies (where drift
+#: shows) stay in view; the bands of :func:`fit_residuals` follow the count
+MAX_BLOCKS = 32
+MIN_BLOCK_FRAMES = 512
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,8 +63,9 @@ def _inputs(result):
     inputs = getattr(result, "inputs", None)
     if inputs is None:
         raise ValueError(
-            "this CalibrationResult holds no recordings (a result rebuilt from JSON or made "
-            "by hand): its figures need the data it was fitted to. Plot a result returned by "
+            "this CalibrationResult holds no recordings (a result of fit_psd, rebuilt from "
+            "JSON or made by hand): its figures need the trace it was fitted to. Plot a result "
+            "returned by "
             "blurtrap.calibrate, or pass the recording yourself: "
             "blurtrap.plotting.fig6_psd(recording, result)")
     g = float(result.gamma)
@@ -158,12 +160,13 @@ def fit_spectrum(result, *, n_blocks=None, ax=None):
     the recordings `result` was fitted to, with the fitted model (what the fit compared the
     data with) and, when that model has blur or aliasing, the naive Lorentzian
     ``D / (pi^2 (f_c^2 + f^2))`` with the same k and gamma (no blur, aliasing or noise).
-    Bands the fit left out are shaded.
+    Bands the fit left out are shaded. The recordings are the ones the fit used (after
+    ``calibrate`` subtracted any lines it found; its notes name them).
 
     - `result`: a ``CalibrationResult`` from :func:`blurtrap.calibrate` (it keeps its
       recordings and model; a result rebuilt from JSON does not: ``ValueError``).
     - `n_blocks`: blocks of the periodogram (default: the fit's for ``method="psd"``, else
-      up to 128 blocks of at least 64 frames).
+      up to 32 blocks of at least 512 frames).
     - `ax`: axes to draw into (default: a new pyplot figure).
 
     **Returns:** the Figure.
@@ -187,6 +190,7 @@ def fit_spectrum(result, *, n_blocks=None, ax=None):
                       label=("naive Lorentzian, same k and gamma" if s.index == 0 else None))
     f_all = np.concatenate([s.f for s in specs])
     _shade_unfitted(ax, result, float(f_all.min()), float(f_all.max()))
+    _plain_log_ticks(ax.xaxis, (float(f_all.min()), float(f_all.max())))
     ax.set_xlabel("frequency f [Hz]")
     ax.set_ylabel("one-sided PSD [nm$^2$/Hz]")
     ax.set_title(_title(result), fontsize=9)
@@ -236,6 +240,7 @@ def fit_residuals(result, *, n_blocks=None, ax=None):
     else:  # a missing effect puts ratios at 0.1x or 100x: log axis with plain numbers
         _plain_log_ticks(ax.yaxis, lims)
     ax.set_ylim(*lims)
+    _plain_log_ticks(ax.xaxis, (lo, hi))
     ax.set_xlabel("frequency f [Hz]")
     ax.set_ylabel("P_data / P_model (dimensionless)")
     ax.set_title(_title(result), fontsize=9)

@@ -128,6 +128,17 @@ def test_volts_are_scaled_by_the_displacement_sensitivity(rng):
     np.testing.assert_allclose(data.get_ydata(), 2 * p * 1e18, rtol=1e-9)
 
 
+@pytest.mark.parametrize("n, method, blocks", [(8192, "likelihood", 16), (65536, "exact", 32),
+                                               (1024, "allan", 2), (8192, "psd", NB)])
+def test_default_block_count(rng, n, method, blocks):
+    """A blocked fit's own count; otherwise at most 32 blocks of at least 512 frames."""
+    rec = bt.Recording(trace(rng, n), frame_interval=DT, exposure=DT)
+    data = next(v for k, v in lines(result_for([rec], [5e-5], method=method).plot()).items()
+                if k.startswith("data"))
+    assert data.get_label().startswith(f"data: {blocks} blocks")
+    assert data.get_xdata()[0] == pytest.approx(blocks / (n * DT))  # lowest frequency
+
+
 def test_unfitted_bands_are_shaded(rng):
     rec = bt.Recording(trace(rng), frame_interval=DT, exposure=DT)
     fig = result_for([rec], [5e-5], excluded=[(100.0, 150.0)]).plot()
