@@ -68,7 +68,7 @@ def _function_scope_lines(path: pathlib.Path) -> set[int]:
 
 #: a result object's ``plot()`` method may import plotting lazily, inside the method: the
 #: layer itself never loads matplotlib (test_import_is_light) and plotting never imports it back
-LAZY_PLOTTING = {"design"}
+LAZY_PLOTTING = {"design", "inference"}
 
 
 @pytest.mark.parametrize("layer", sorted(ALLOWED))

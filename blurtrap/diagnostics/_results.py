@@ -4,8 +4,17 @@ effect), :class:`Diagnosis` (adequacy, goodness of fit, ranking) and :class:`Sel
 from __future__ import annotations
 
 import dataclasses
+import math
 
+from ..inference._fit_inputs import html_table
 from ..inference._result import CalibrationResult
+
+_COLUMNS = ("effect", "delta_loglik", "dof", "delta_aic", "p_value", "significant",
+            "plausible", "evidence")
+
+
+def _num(v, fmt):
+    return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
 @dataclasses.dataclass(frozen=True, repr=False)
@@ -32,6 +41,18 @@ class Candidate:
         return (f"Candidate({self.effect!r}, dAIC = {da}, p = {self.p_value:.3g}, {flags}: "
                 f"{self.evidence})")
 
+    def __str__(self) -> str:
+        return self.__repr__()
+
+    def _repr_html_(self) -> str:
+        return html_table(_COLUMNS, [self._row()])
+
+    def _row(self):
+        return (self.effect, _num(self.delta_loglik, ".2f"), self.dof,
+                _num(self.delta_aic, ".2f"), _num(self.p_value, ".3g"),
+                "yes" if self.significant else "no", "yes" if self.plausible else "NO",
+                self.evidence)
+
     def to_dict(self):
         return {"effect": self.effect, "delta_loglik": self.delta_loglik, "dof": self.dof,
                 "p_value": self.p_value, "delta_aic": self.delta_aic,
@@ -54,6 +75,55 @@ class Diagnosis:
     @property
     def best(self) -> Candidate | None:
         return self.ranking[0] if self.ranking and self.ranking[0].significant else None
+
+    def __getitem__(self, effect: str) -> Candidate:
+        """The candidate of one effect by its canonical name: ``d["drift"]``."""
+        for c in self.ranking:
+            if c.effect == effect:
+                return c
+        raise KeyError(f"no candidate {effect!r} in this diagnosis; the effects tried are "
+                       f"{[c.effect for c in self.ranking]}")
+
+    def verdict(self) -> str:
+        """One line: adequate, or the best missing effect (or NOT adequate without one)."""
+        if self.adequate:
+            return ("adequate: no candidate effect improves the fit significantly "
+                    f"(Bonferroni threshold p < {self.threshold:.3g})")
+        b = self.best
+        return ("NOT adequate" + (f": the best missing effect is {b.effect} (dAIC = "
+                                  f"{_num(b.delta_aic, '.2f')}, p = {b.p_value:.3g})"
+                                  if b is not None else ""))
+
+    def __repr__(self) -> str:
+        return (f"Diagnosis(model {self.model!r}, {self.verdict()}; "
+                f"{len(self.ranking)} candidates)")
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def _repr_html_(self) -> str:
+        """The ranking table (evidence and verdict) for notebooks."""
+        g = self.gof
+        cap = (f"model {self.model}: goodness of fit statistic = {g['statistic']:.4g}, "
+               f"dof = {g['dof']}, p = {g['p_value']:.3g}; {self.verdict()}")
+        table = html_table(_COLUMNS, [c._row() for c in self.ranking], cap)
+        if self.notes:
+            import html
+
+            table += "".join(f"<p>note: {html.escape(n)}</p>" for n in self.notes)
+        return table
+
+    def to_dataframe(self):
+        """The ranking as a pandas DataFrame (one row per candidate effect, best first,
+        indexed by effect; columns as :meth:`Candidate.to_dict`). Needs pandas
+        (``pip install "blurtrap[pandas]"``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError('Diagnosis.to_dataframe needs pandas: pip install '
+                              '"blurtrap[pandas]"') from None
+        rows = [c.to_dict() for c in self.ranking]
+        return pd.DataFrame(rows, columns=list(_COLUMNS)).set_index("effect")
 
     def to_dict(self) -> dict:
         return {"model": self.model, "adequate": self.adequate, "gof": dict(self.gof),

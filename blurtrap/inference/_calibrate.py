@@ -1228,7 +1228,8 @@ def calibrate(
     res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
                      plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
                      _flag("robust", robust))
-    res = finish_instrument(res, plan)
+    res = finish_instrument(res, plan).with_inputs(plan.recordings, plan.model,
+                                                   plan.f_range, plan.excluded)
     if not plan.volts:
         data_notes += tuple(_stokes_notes(recs, radii, res))
     notes = tuple(plan.notes) + data_notes

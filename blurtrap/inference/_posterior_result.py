@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from ..physics._constants import BOLTZMANN
-from ._result import LAB, CalibrationResult
+from ._fit_inputs import html_table
+from ._result import DESCRIBE, LAB, CalibrationResult, Parameter
 
 # lab units for summaries: name -> (factor from SI, unit)
 LAB_UNITS = LAB
@@ -103,6 +104,63 @@ class Posterior:
 
     def __str__(self) -> str:  # pragma: no cover - convenience
         return self.summary()
+
+    def __repr__(self) -> str:
+        return (f"Posterior({self.model!r}, {self.likelihood} likelihood, {self.n_walkers} "
+                f"walkers x {self.n_steps} steps, {self.n_samples} samples; quantities "
+                f"{list(self.samples)})")
+
+    def __getitem__(self, name: str) -> Parameter:
+        """A quantity by name, as ``CalibrationResult[name]``: ``value`` = posterior median,
+        ``error`` = half the central 68 % interval, ``unit`` (SI), lab-unit value and error,
+        ``interval`` = central 95 % credible interval (SI). ``"D"`` is ``"diffusion"``."""
+        key = "diffusion" if name == "D" else name
+        if key not in self.samples:
+            raise KeyError(f"no quantity {name!r} in this posterior; its quantities are "
+                           f"{list(self.samples)} (and 'D' for 'diffusion')")
+        q = np.quantile(self.samples[key], [0.025, 0.16, 0.5, 0.84, 0.975])
+        unit, what = DESCRIBE.get(_base(key), ("SI", _base(key).replace("_", " ")))
+        fac, lab_unit = LAB_UNITS.get(_base(key), (1.0, unit))
+        value, error = float(q[2]), 0.5 * float(q[3] - q[1])
+        return Parameter(key, value, error, unit, what, value * fac, error * fac, lab_unit,
+                         (float(q[0]), float(q[4])))
+
+    def _repr_html_(self) -> str:
+        """Table in lab units for notebooks: median, 68 % and 95 % central intervals, unit,
+        effective sample size and autocorrelation time where the quantity is sampled."""
+        rows = []
+        for name, st in self.stats().items():
+            fac, unit = LAB_UNITS.get(_base(name), (1.0, "SI"))
+            ess, tau = self.ess.get(name), self.autocorr_time.get(name)
+            rows.append((name, f"{st['median'] * fac:.5g}",
+                         f"[{st['q16'] * fac:.5g}, {st['q84'] * fac:.5g}]",
+                         f"[{st['q2.5'] * fac:.5g}, {st['q97.5'] * fac:.5g}]", unit,
+                         "" if ess is None else f"{ess:.0f}",
+                         "" if tau is None else f"{tau:.3g}"))
+        cap = (f"posterior ({self.likelihood} likelihood, model {self.model}): "
+               f"{self.n_walkers} walkers x {self.n_steps} steps, burn-in {self.burn_in}, "
+               f"{self.n_samples} samples, mean acceptance "
+               f"{np.mean(self.acceptance_fraction):.3f}")
+        return html_table(("quantity", "median", "68 % interval", "95 % interval", "unit",
+                           "ESS", "autocorr. time [steps]"), rows, cap)
+
+    def to_dataframe(self):
+        """One row per quantity (as ``self[name]``: median, half the 68 % width, unit, lab
+        units, 95 % interval ``ci_low``/``ci_high``) plus the 68 % interval ``q16``/``q84``
+        and ``ess`` (SI). Needs pandas (``pip install "blurtrap[pandas]"``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError('Posterior.to_dataframe needs pandas: pip install '
+                              '"blurtrap[pandas]"') from None
+        rows = []
+        for name in self.samples:
+            row = dataclasses.asdict(self[name])
+            row["ci_low"], row["ci_high"] = row.pop("interval")
+            row["q16"], row["q84"] = self.interval(name, 0.68)
+            row["ess"] = float(self.ess.get(name, np.nan))
+            rows.append(row)
+        return pd.DataFrame(rows).set_index("name")
 
     def to_dict(self, include_samples: bool = False) -> dict[str, Any]:
         """JSON-able dict in SI units. Top-level ``k``/``gamma``/``tracking_var``/... hold

@@ -56,6 +56,8 @@ DESCRIBE = {
     "corner_frequency": ("Hz", "corner frequency f_c = k/(2 pi gamma)"),
     "displacement_sensitivity": ("m/V", "displacement sensitivity Rd (metres per volt)"),
     "force_sensitivity": ("N/V", "force sensitivity Rf = k Rd (newtons per volt)"),
+    "tau": ("s", "relaxation time tau = gamma/k"),
+    "force_per_nm": ("N", "force at 1 nm from the trap centre (k x 1 nm)"),
 }
 
 
@@ -63,7 +65,8 @@ DESCRIBE = {
 class Parameter:
     """One fitted parameter, by name (``result["k"]``): value and standard error in SI
     (``unit``) and in lab units (``lab_value``, ``lab_error``, ``lab_unit``), its 95 % interval
-    (SI; NaN ends when unknown) and a description."""
+    (SI; NaN ends when unknown) and a description. From a ``Posterior``: the median, half
+    the central 68 % width and the central 95 % credible interval."""
 
     name: str
     value: float
@@ -122,6 +125,9 @@ class CalibrationResult:
     interval_source: Any = dataclasses.field(default=None, repr=False, compare=False)
     _interval_cache: Any = dataclasses.field(default=None, init=False, repr=False,
                                              compare=False)
+    #: :class:`~blurtrap.inference._fit_inputs.FitInputs` (recordings and model the fit
+    #: used), by reference, for :meth:`plot`; not serialised (None when rebuilt from JSON)
+    inputs: Any = dataclasses.field(default=None, repr=False, compare=False)
 
     # ---- access -----------------------------------------------------------------------
     @property
@@ -229,7 +235,31 @@ class CalibrationResult:
         with np.errstate(invalid="ignore", divide="ignore"):
             return self.covariance / np.outer(s, s)
 
+    def with_inputs(self, recordings, model, f_range=None, excluded=()) -> CalibrationResult:
+        """This result keeping a reference to the recordings and model it was fitted to
+        (:class:`FitInputs`), which :meth:`plot` and :meth:`plot_residuals` need."""
+        from ._fit_inputs import FitInputs
+
+        inputs = FitInputs(tuple(recordings), model, None if f_range is None else
+                           tuple(f_range), tuple(tuple(r) for r in excluded or ()))
+        return dataclasses.replace(self, inputs=inputs)
+
     # ---- output -----------------------------------------------------------------------
+    def plot(self, ax=None, *, n_blocks=None):
+        """Blocked spectrum of the fitted recordings with the fitted model (and the naive
+        Lorentzian where the model blurs or folds): :func:`blurtrap.plotting.fit_spectrum`.
+        Returns the figure; ``ValueError`` for a result rebuilt from JSON (no recordings)."""
+        from ..plotting._result_figs import fit_spectrum
+
+        return fit_spectrum(self, n_blocks=n_blocks, ax=ax)
+
+    def plot_residuals(self, ax=None, *, n_blocks=None):
+        """Data/model of the blocked spectrum with its expected 68 % and 95 % bands:
+        :func:`blurtrap.plotting.fit_residuals`. Returns the figure."""
+        from ..plotting._result_figs import fit_residuals
+
+        return fit_residuals(self, n_blocks=n_blocks, ax=ax)
+
     def __getitem__(self, name: str) -> Parameter:
         """A parameter by name, with unit and description: ``result["k"].value`` (SI),
         ``.error``, ``.unit``, ``.lab_value``; ``"D"`` (or ``"diffusion"``) is derived."""
@@ -246,6 +276,15 @@ class CalibrationResult:
         fac, lab_unit = LAB.get(key, (1.0, unit))
         return Parameter(name, value, error, unit, what, value * fac, error * fac, lab_unit,
                          interval if interval is not None else (math.nan, math.nan))
+
+    def __repr__(self) -> str:
+        """Short, without arrays: method, model, each parameter +- SE in lab units."""
+        ps = []
+        for n, v, e in zip(self.param_names, self.values, self.errors, strict=True):
+            fac, unit = LAB.get(n.split("[")[0], (1.0, "SI"))
+            ps.append(f"{n} = {v * fac:.5g} +- {e * fac:.2g} {unit}")
+        return (f"CalibrationResult({self.method}, model {self.model!r}: {'; '.join(ps)}; "
+                f"{self.n_recordings} recording(s), {self.n_frames} frames)")
 
     def _repr_html_(self) -> str:
         """The lab-unit table of :meth:`summary` for notebooks."""

@@ -16,6 +16,8 @@ The paper's figures (Wong & Halvorsen 2006): :func:`fig1a_universal_curve`,
 :func:`fig1b_histogram`, :func:`fig3_fractional_variance`, :func:`fig4_stiffness_vs_power`,
 :func:`fig5_highpass`, :func:`fig6_psd`, :func:`fig7_deviation`. Beyond it: :func:`corner`,
 :func:`residuals_before_after`, :func:`naive_error_map`, :func:`diagnose_ranking`.
+A calibration's own figures: :func:`fit_spectrum` and :func:`fit_residuals` (also
+``CalibrationResult.plot()`` and ``.plot_residuals()``).
 Experiment design: :func:`design_se` (also ``DesignResult.plot()``).
 """
 
@@ -32,6 +34,8 @@ from ._psd_figs import fig6_psd as fig6_psd
 from ._psd_figs import fig7_deviation as fig7_deviation
 from ._psd_figs import residuals_before_after as residuals_before_after
 from ._ranking import diagnose_ranking as diagnose_ranking
+from ._result_figs import fit_residuals as fit_residuals
+from ._result_figs import fit_spectrum as fit_spectrum
 from ._variance_figs import fig3_fractional_variance as fig3_fractional_variance
 from ._variance_figs import fig4_stiffness_vs_power as fig4_stiffness_vs_power
 
@@ -48,6 +52,8 @@ __all__ = [
     "fig5_highpass",
     "fig6_psd",
     "fig7_deviation",
+    "fit_residuals",
+    "fit_spectrum",
     "naive_error_map",
     "residuals_before_after",
     "save",
