@@ -237,8 +237,8 @@ def sweep(
             for i, cell in enumerate(mine):
                 for f, v in _unit(g, cell, c, key, models, truth, cfg).items():
                     local[f][i] = v
-                if bar is not None:
-                    bar.update(n_proc)
+                if bar is not None:  # the cells of this round on all processes
+                    bar.update(min(n_proc, g.n_cells - i * n_proc))
             acc = st.merge(acc, _gather(local, g.n_cells, n_proc))
             done = c + 1
             if out is not None and me == 0:

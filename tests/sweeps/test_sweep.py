@@ -71,7 +71,7 @@ class Stop(Exception):
     pass
 
 
-def test_interrupted_sweep_resumes_to_the_same_result(full, tmp_path):
+def test_interrupted_sweep_resumes_to_the_same_result(full, tmp_path, capsys):
     out = tmp_path / "state.npz"
     seen = []
 
@@ -87,8 +87,11 @@ def test_interrupted_sweep_resumes_to_the_same_result(full, tmp_path):
     assert seen == [(1, 2), (2, 2)]  # only the second chunk was computed again
     assert part.complete
     _same(part, full)
-    again = run(out=out, callback=lambda d, t: seen.append((d, t)))  # nothing left to do
-    assert seen == [(1, 2), (2, 2)]
+    capsys.readouterr()
+    again = run(out=out, callback=lambda d, t: seen.append((d, t)), progress=True)
+    assert seen == [(1, 2), (2, 2)]  # nothing left to do
+    err = capsys.readouterr().err  # the tqdm bar: 2 chunks x 6 cells, all done
+    assert "sweep: 100%" in err and "12/12" in err, err
     _same(again, full)
     with pytest.raises(ValueError, match="different sweep"):
         run(out=out, n_frames=1024)
