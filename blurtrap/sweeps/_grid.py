@@ -46,7 +46,7 @@ class Grid:
         """Parameters of flat cell ``g`` (row-major over ``dims``): SI floats, with
         ``gamma`` resolved from the radius if needed and ``injections`` a tuple."""
         idx = np.unravel_index(g, self.shape) if self.dims else ()
-        p = dict(self.fixed)
+        p: dict = dict(self.fixed)
         for d, i in zip(self.dims, idx):
             p[d] = self.coords[d][i]
         p.setdefault("temperature", DEFAULT_TEMPERATURE)

@@ -27,7 +27,7 @@ CELL_FIELDS = ("n_items", "n_at_bound", "status")
 
 def empty(n_cells: int, n_models: int) -> dict[str, np.ndarray]:
     shape = (n_cells, n_models, len(FITTED))
-    acc = {f: np.zeros(shape) for f in PARAM_FIELDS}
+    acc: dict[str, np.ndarray] = {f: np.zeros(shape) for f in PARAM_FIELDS}
     acc["n_items"] = np.zeros((n_cells, n_models))
     acc["n_at_bound"] = np.zeros((n_cells, n_models))
     acc["status"] = np.zeros((n_cells, n_models, len(STATUSES)))
@@ -43,7 +43,7 @@ def chunk_stats(batch, truth: dict[str, float]) -> dict[str, np.ndarray]:
     """Statistics of one ``BatchCalibration`` (one cell, one model, one chunk): the fields
     of :func:`empty` for a single cell and model (leading shape dropped)."""
     ok = np.asarray(batch.success, dtype=bool)
-    out = {f: np.zeros(len(FITTED)) for f in PARAM_FIELDS}
+    out: dict[str, np.ndarray] = {f: np.zeros(len(FITTED)) for f in PARAM_FIELDS}
     for j, name in enumerate(FITTED):
         v = np.asarray(getattr(batch, name), dtype=np.float64)[ok]
         e = np.asarray(getattr(batch, name + "_err"), dtype=np.float64)[ok]
@@ -59,9 +59,10 @@ def chunk_stats(batch, truth: dict[str, float]) -> dict[str, np.ndarray]:
             out["n_se"][j] = has.sum()
             out["mean_se"][j] = e[has].sum() / has.sum()
             out["n_cover"][j] = np.sum(np.abs(v[has] - truth[name]) <= Z95 * e[has])
-    out["n_items"] = np.float64(ok.size)
+    out["n_items"] = np.asarray(ok.size, dtype=np.float64)
     at = batch.at_bound
-    out["n_at_bound"] = np.float64(0 if at is None else np.sum(np.asarray(at, dtype=bool)))
+    out["n_at_bound"] = np.asarray(0 if at is None else np.sum(np.asarray(at, dtype=bool)),
+                                   dtype=np.float64)
     out["status"] = np.bincount([_status_kind(str(s)) for s in batch.status],
                                 minlength=len(STATUSES)).astype(np.float64)
     return out
