@@ -1,5 +1,6 @@
 """bt.sweep: statistics against a direct computation, resumption, labels and errors."""
 
+import json
 import sys
 
 import jax
@@ -111,6 +112,9 @@ def test_labels_dataframe_xarray_summary_plot(full, monkeypatch):
     monkeypatch.setitem(sys.modules, "xarray", None)
     with pytest.raises(ImportError, match="to_xarray needs xarray"):
         full.to_xarray()
+    back = json.loads(json.dumps(full.to_dict()))
+    assert back["dims"] == ["k", "exposure", "model"] and back["attrs"]["n_traces"] == 16
+    assert back["data"]["bias_k"][1][1][1] == row.bias_k
     text = full.summary()
     assert "k [pN/nm]" in text and "exposure [ms]" in text and "0.1 | 0.2685 | standard" in text
     fig = full.plot(x="exposure", y="bias_k")
