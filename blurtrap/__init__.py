@@ -83,6 +83,8 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .simulate import TrapezoidProfile as TrapezoidProfile
     from .simulate import quartic_force as quartic_force
     from .simulate import simulate as simulate
+    from .sweeps import SweepResult as SweepResult
+    from .sweeps import sweep as sweep
 
 # public name -> the submodule that defines it (imported on first access)
 _LAZY = {
@@ -121,6 +123,8 @@ _LAZY = {
     "allan_variance": "inference", "AllanVariance": "inference",
     # instrument files
     "load_bluelake": "data", "load_h5": "data", "load_tdms": "data",
+    # sweeps
+    "sweep": "sweeps", "SweepResult": "sweeps",
 }
 # subpackages that ``import blurtrap`` used to make available as attributes
 _SUBMODULES = ("_config", "data", "diagnostics", "inference", "physics")

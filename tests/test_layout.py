@@ -19,6 +19,7 @@ ALLOWED = {
     "inference": {"physics", "data", "_config", "_constants"},
     "diagnostics": {"physics", "data", "inference", "simulate", "_config", "_constants"},
     "design": {"physics", "data", "inference", "simulate", "_config", "_constants"},
+    "sweeps": {"physics", "inference", "simulate", "_config", "_constants"},
     "plotting": {"physics", "data", "inference", "diagnostics", "design", "simulate", "_config",
                  "_constants"},
 }

@@ -46,6 +46,9 @@ from ._instruments import (
 from ._instruments import (
     stage_positions as stage_positions,
 )
+from ._labelled import (
+    LabelledFrames as LabelledFrames,
+)
 from ._profiles import (
     ExponentialProfile as ExponentialProfile,
 )

@@ -26,6 +26,7 @@ from ._injections import (
     TimingJitter,
 )
 from ._instruments import Sensitivity, StageDrive, check_drives, drive_frames
+from ._labelled import label_frames
 from ._linear import simulate_photodiode
 from ._spectral import simulate_spectral
 
@@ -254,6 +255,7 @@ def simulate(
     return_times: bool = False,
     unroll: int = 1,
     normal_dtype=None,
+    labelled: bool = False,
 ):
     r"""Simulate blurred, sampled positions of a bead in an optical trap (Brownian dynamics).
 
@@ -362,10 +364,16 @@ def simulate(
       ``jnp.float32`` with ``dtype=float64`` is ~2.4x faster on CPU (threefry float64 normals
       cost ~20 ns each); the normals then have float32 resolution (tails truncated near
       5.3 sigma, a ~1e-6 relative effect on variances) while the dynamics stay float64.
+    - `labelled`: return a :class:`~blurtrap.simulate.LabelledFrames` instead: the same
+      positions (``.values``) with named axes (each grid axis named after the parameter that
+      varies along it alone, e.g. ``("k", "exposure", "trace", "frame")``), the parameters
+      as coordinates (``.coords``), the times (``.times``, with `return_times`) and
+      ``to_xarray()``.
 
     **Returns:** positions [m] of shape ``(*G, n_traces, n_frames)``, or
     ``(*G, n_windows, n_traces, n_frames)`` with :class:`ExposureWindows`; with
-    ``return_times=True`` a tuple ``(positions, times)``.
+    ``return_times=True`` a tuple ``(positions, times)``; with ``labelled=True`` a
+    :class:`~blurtrap.simulate.LabelledFrames`.
 
     **Raises:** ``ValueError`` naming the parameter for non-positive or non-finite parameters,
     ``exposure > frame_interval``, ``n_frames < 1``, ``key=None``, an unknown method, or
@@ -694,5 +702,9 @@ def simulate(
         pos = pos.reshape(out_shape)
     if return_times:
         tshape = tuple(shape) + ((1,) if windows else ()) + (times.shape[-2], n_frames)  # pyright: ignore
-        return pos, times.reshape(tshape)  # pyright: ignore[reportOptionalMemberAccess]
-    return pos
+        times = times.reshape(tshape)  # pyright: ignore[reportOptionalMemberAccess]
+    if labelled:
+        return label_frames(pos, {"k": k_, "gamma": g_, "exposure": w_, "frame_interval": dt_,
+                                  "temperature": t_, "tracking_std": eps_}, shape,
+                            wins if windows else None, times if return_times else None)
+    return (pos, times) if return_times else pos
