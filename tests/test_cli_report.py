@@ -1,0 +1,159 @@
+"""``blurtrap calibrate/diagnose MANIFEST --report DIR``, run in-process through
+``blurtrap.cli.main`` on a small simulated manifest (2048 frames)."""
+
+import json
+import re
+import types
+
+import numpy as np
+import pytest
+
+from blurtrap.cli import main
+
+
+@pytest.fixture(scope="module")
+def manifest(tmp_path_factory):
+    """One camera recording with a large tracking error (10 nm rms against a 20 nm trap
+    rms): the ``blur`` model misses ``tracking_noise`` clearly even in 2048 frames."""
+    out = tmp_path_factory.mktemp("cli_report") / "sim"
+    assert main(["simulate", "--k", "0.01", "--radius", "0.765", "--exposure-ms", "0.5",
+                 "--fps", "1500", "--frames", "2048", "--tracking-nm", "10", "--seed", "0",
+                 "--out", str(out), "--json"]) == 0
+    return out / "manifest.json"
+
+
+def _image_ok(path):
+    """A PNG that matplotlib reads back as a picture of reasonable size."""
+    from matplotlib.image import imread
+
+    img = imread(path)
+    assert img.ndim == 3 and img.shape[2] in (3, 4), (path, img.shape)
+    assert img.shape[0] > 200 and img.shape[1] > 300, (path, img.shape)
+    assert float(np.ptp(img[..., :3])) > 0.5, f"{path} is blank"
+
+
+def _table_value(report: str, label: str) -> str:
+    """The value cell of the parameter-table row whose first cell starts with `label`."""
+    m = re.search(rf"^\| {re.escape(label)}[^|]*\| ([^|]+) \|", report, flags=re.M)
+    assert m, f"no row {label!r} in report.md:\n{report}"
+    return m.group(1).strip()
+
+
+def test_calibrate_report(manifest, tmp_path, capsys):
+    out = tmp_path / "new" / "report"  # parents created
+    capsys.readouterr()
+    assert main(["calibrate", str(manifest), "--method", "psd", "--report", str(out),
+                 "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    files = ["report.md", "result.json", "spectrum_0.png", "histogram_0.png"]
+    assert res["report"]["files"] == files and res["report"]["failed"] == []
+    assert sorted(p.name for p in out.iterdir()) == sorted(files)
+    for f in files[2:]:
+        _image_ok(out / f)
+    report = (out / "report.md").read_text()
+    for f in files[2:]:
+        assert f"]({f})" in report
+    # k in pN/nm equal, to the printed precision, to the JSON result
+    assert _table_value(report, "k (stiffness)") == f"{res['k'] * 1e3:.6g}"
+    assert _table_value(report, "gamma (friction)") == f"{res['gamma'] * 1e6:.6g}"
+    assert _table_value(report, "D = kT/gamma") == f"{res['diffusion'] * 1e12:.6g}"
+    assert _table_value(report, "f_c = k/(2 pi gamma)") == f"{res['corner_frequency']:.6g}"
+    eps_nm = float(_table_value(report, "eps (tracking error rms)"))
+    assert eps_nm == pytest.approx(np.sqrt(res["tracking_var"]) * 1e9, rel=1e-5)
+    for unit in ("| pN/nm |", "| pN s/um |", "| um^2/s |", "| nm |", "| Hz |"):
+        assert unit in report
+    assert f"p = {res['gof']['p_value']:.3g}" in report
+    assert json.loads((out / "result.json").read_text())["k"] == res["k"]
+
+
+def test_report_replaces_only_its_own_files(manifest, tmp_path, capsys):
+    """A report into a DIR with files replaces report.md and leaves the user's other files
+    alone; without --json the table is printed with the report's path. A method without
+    friction (equipartition) gets the data spectrum and says why there is no model."""
+    out = tmp_path / "rep"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "report.md").write_text("stale")
+    capsys.readouterr()
+    assert main(["calibrate", str(manifest), "--method", "equipartition", "--report",
+                 str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "pN/nm" in text and f"report: {out / 'report.md'} (3 files)" in text
+    assert (out / "notes.txt").read_text() == "mine"
+    report = (out / "report.md").read_text()
+    assert report.startswith("# blurtrap calibration report") and "Method `equipartition`" in report
+    _image_ok(out / "spectrum_0.png")
+    assert "data only: method equipartition fits no friction" in report
+    assert "- histogram_0.png: method equipartition fits no friction" in report
+    assert not (out / "histogram_0.png").exists()
+
+
+def test_report_dir_that_is_a_file_is_refused_before_fitting(manifest, tmp_path, capsys,
+                                                             monkeypatch):
+    import blurtrap.diagnostics
+    import blurtrap.inference
+
+    def boom(*a, **kw):
+        raise AssertionError("fitted before the report folder was checked")
+
+    monkeypatch.setattr(blurtrap.inference, "calibrate", boom)
+    monkeypatch.setattr(blurtrap.diagnostics, "diagnose", boom)
+    target = tmp_path / "taken"
+    target.write_text("a file")
+    for command in ("calibrate", "diagnose"):
+        capsys.readouterr()
+        assert main([command, str(manifest), "--report", str(target)]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"blurtrap {command}: error: --report {target}: is a file")
+        assert target.read_text() == "a file"
+
+
+def test_help_says_what_report_overwrites(capsys):
+    for command in ("calibrate", "diagnose"):
+        assert main([command, "--help"]) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert "--report DIR" in text and "overwritten" in text and "left alone" in text
+
+
+def test_diagnose_report_names_the_missing_effect(manifest, tmp_path, capsys):
+    out = tmp_path / "diag"
+    capsys.readouterr()
+    assert main(["diagnose", str(manifest), "--model", "blur", "--report", str(out),
+                 "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    top = d["ranking"][0]
+    assert top["effect"] == "tracking_noise" and top["significant"] is True
+    figures = ["ranking.png", "before_after.png", "spectrum_0.png", "histogram_0.png"]
+    assert d["report"]["files"] == ["report.md", "diagnosis.json"] + figures
+    for f in figures:
+        _image_ok(out / f)
+    report = (out / "report.md").read_text()
+    assert "**NOT adequate**" in report
+    assert "Missing effect: **`tracking_noise`**" in report
+    assert re.search(r"^\| 1 \| `tracking_noise` \|", report, flags=re.M)
+    assert "## Refit with `tracking_noise` added" in report
+    # the base fit's k, to the printed precision, and the refit's eps row
+    base_k = d["fit"]["k"] * 1e3
+    assert f"| k (stiffness) | {base_k:.6g} |" in report
+    assert "eps (tracking error rms)" in report.split("## Fit of the model")[0]
+    for f in figures:
+        assert f"]({f})" in report
+    # add and refit from the command line: the text output also gives the refit
+    assert main(["diagnose", str(manifest), "--model", "blur"]) == 0
+    text = capsys.readouterr().out
+    after = text.split("fit with tracking_noise added (model blur+tracking_noise):")[1]
+    assert re.search(r"^  k +\d", after, flags=re.M) and "eps (tracking rms)" in after
+
+
+def test_volts_recording_is_drawn_in_metres():
+    from blurtrap._report_figures import in_metres
+    from blurtrap.data import Recording
+
+    rec = Recording(np.linspace(-1.0, 1.0, 64), frame_interval=1e-3, exposure=1e-3,
+                    position_unit="V")
+    fit = types.SimpleNamespace(params={"displacement_sensitivity": 2e-7})
+    m = in_metres(rec, fit)
+    assert m.position_unit == "m"
+    np.testing.assert_allclose(m.positions, rec.positions * 2e-7, rtol=1e-15)
+    with pytest.raises(ValueError, match="displacement_sensitivity"):
+        in_metres(rec, types.SimpleNamespace(params={}))
