@@ -157,3 +157,85 @@ def test_volts_recording_is_drawn_in_metres():
     np.testing.assert_allclose(m.positions, rec.positions * 2e-7, rtol=1e-15)
     with pytest.raises(ValueError, match="displacement_sensitivity"):
         in_metres(rec, types.SimpleNamespace(params={}))
+
+
+def _result(names, values, errors, k_rec, k_err, model="standard"):
+    from blurtrap.inference import CalibrationResult
+
+    return CalibrationResult(
+        method="likelihood", model=model, param_names=tuple(names),
+        values=np.asarray(values, float), covariance=np.diag(np.asarray(errors, float) ** 2),
+        temperature=295.0, k_per_recording=np.asarray(k_rec, float),
+        k_per_recording_err=np.asarray(k_err, float), gof={}, n_recordings=len(k_rec),
+        n_frames=1000)
+
+
+def test_parameter_table_in_lab_units_for_volts():
+    """k, gamma, D, eps, f_c, Rd and Rf rows in lab units, checked against the SI values
+    converted here (D = kT/gamma, f_c = k/(2 pi gamma), Rf = k Rd)."""
+    from blurtrap._report import parameter_table
+
+    k, g, tv, rd = 3e-5, 1.75e-8, 4e-18, 80e-9  # N/m, N s/m, m^2, m/V
+    fit = _result(["k", "gamma", "tracking_var", "displacement_sensitivity",
+                   "force_sensitivity"], [k, g, tv, rd, k * rd],
+                  [1e-6, 1e-10, 1e-18, 1e-9, 5e-14], [k], [1e-6], model="photodiode_aa")
+    table = "\n".join(parameter_table(fit))
+    kt = 1.380649e-23 * 295.0
+    expect = {"k (stiffness)": (k * 1e3, "pN/nm"), "gamma (friction)": (g * 1e6, "pN s/um"),
+              "D = kT/gamma": (kt / g * 1e12, "um^2/s"),
+              "eps (tracking error rms)": (2.0, "nm"),
+              "f_c = k/(2 pi gamma)": (k / (2 * np.pi * g), "Hz"),
+              "Rd (displacement sensitivity)": (80.0, "nm/V"),
+              "Rf = k Rd (force sensitivity)": (k * rd * 1e12, "pN/V")}
+    for label, (value, unit) in expect.items():
+        m = re.search(rf"^\| {re.escape(label)}[^|]*\| ([^|]+) \| [^|]+ \| ([^|]+) \|", table,
+                      flags=re.M)
+        assert m, f"no row {label!r}:\n{table}"
+        assert float(m.group(1)) == pytest.approx(value, rel=1e-5), label
+        assert m.group(2).strip() == unit, label
+    # eps error from eps^2's by the delta method: 1 nm^2 / (2 x 2 nm)
+    assert "| eps (tracking error rms) | 2 | 0.25 | nm |" in table
+
+
+def test_per_recording_table_when_k_differs():
+    from blurtrap._report import per_recording_table
+    from blurtrap.data import Recording
+
+    g = 1e-8
+    fit = _result(["k[P=100 mW]", "k[P=200 mW]", "gamma"], [1e-5, 2e-5, g],
+                  [1e-7, 2e-7, 1e-10], [1e-5, 2e-5], [1e-7, 2e-7])
+    recs = [Recording(np.linspace(-1e-8, 1e-8, 8), frame_interval=1e-3, exposure=1e-3, name=f"r{i}")
+            for i in range(2)]
+    rows = per_recording_table(fit, recs)[2:]
+    assert rows[0].startswith("| recording 0 (r0) | 0.01 | 0.0001 | ")
+    assert rows[1].startswith("| recording 1 (r1) | 0.02 | 0.0002 | ")
+    assert float(rows[1].split("|")[4]) == pytest.approx(2e-5 / (2 * np.pi * g), rel=1e-5)
+    assert per_recording_table(_result(["k", "gamma"], [1e-5, g], [1e-7, 1e-10], [1e-5],
+                                       [1e-7]), recs[:1]) == []
+
+
+def test_anti_aliased_photodiode_fit_is_drawn(tmp_path):
+    """calibrate names the anti-aliased photodiode model ``photodiode_aa``: the name
+    resolves (no blur, no folding), its drawn spectrum is the unfolded Lorentzian plus the
+    white floor eps^2 dt (numpy reference), and a volts trace is drawn in nm."""
+    from blurtrap._report_figures import Figures, in_metres, spectrum_figure
+    from blurtrap.data import Recording
+    from blurtrap.inference import get_model
+    from blurtrap.plotting._common import model_psd
+
+    mdl = get_model("photodiode_aa")
+    assert (mdl.blur, mdl.alias, mdl.noise) == (False, False, True)
+    k, g, tv, rd, dt = 3e-5, 1.75e-8, 4e-18, 80e-9, 5e-5
+    fit = _result(["k", "gamma", "tracking_var", "displacement_sensitivity",
+                   "force_sensitivity"], [k, g, tv, rd, k * rd],
+                  [1e-6, 1e-10, 1e-18, 1e-9, 5e-14], [k], [1e-6], model="photodiode_aa")
+    x = np.random.default_rng(5).normal(0.0, 1.0, 4096) * np.sqrt(1.380649e-23 * 295 / k) / rd
+    rec = Recording(x, frame_interval=dt, exposure=dt, position_unit="V")
+    f = np.array([10.0, 300.0, 3000.0, 9000.0])
+    tau, s2 = g / k, 1.380649e-23 * 295.0 / k
+    ref = 2 * s2 * tau / (1 + (2 * np.pi * f * tau) ** 2) + tv * dt
+    np.testing.assert_allclose(model_psd(fit, in_metres(rec, fit), f), ref, rtol=1e-10)
+    figs = Figures(tmp_path)
+    figs.attempt("spectrum_0", lambda: spectrum_figure(in_metres(rec, fit), fit, "r"), "c")
+    assert figs.failed == [] and figs.files == ["spectrum_0.png"]
+    _image_ok(tmp_path / "spectrum_0.png")
