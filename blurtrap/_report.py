@@ -15,11 +15,12 @@ from pathlib import Path
 
 from . import _report_figures as rf
 
-#: the lab unit of each row of the parameter table: name -> (factor from SI, unit)
-_TABLE_NAMES = {"k": "k (stiffness)", "c": "c = k/P (stiffness per laser power)",
-                "gamma": "gamma (friction)", "tracking_var": "eps^2 (tracking-error variance)",
-                "displacement_sensitivity": "Rd (displacement sensitivity)",
-                "force_sensitivity": "Rf = k Rd (force sensitivity)"}
+#: symbol and meaning of the rows of the parameter table (else the parameter's description)
+_TABLE_NAMES = {"k": ("k", "stiffness"), "c": ("c = k/P", "stiffness per laser power"),
+                "gamma": ("gamma", "friction"),
+                "tracking_var": ("eps^2", "tracking-error variance"),
+                "displacement_sensitivity": ("Rd", "displacement sensitivity"),
+                "force_sensitivity": ("Rf = k Rd", "force sensitivity")}
 
 
 def report_dir(path) -> Path:
@@ -73,7 +74,8 @@ def parameter_table(fit) -> list[str]:
         base = name.split("[")[0]
         fac = LAB.get(base, (1.0, ""))[0]
         lo, hi = ivs.get(name, (math.nan, math.nan))
-        label = _TABLE_NAMES.get(base, p.description) + name[len(base):]
+        sym, what = _TABLE_NAMES.get(base, (base, p.description))
+        label = f"{sym}{name[len(base):]} ({what})"
         lines.append(_row(label, p.lab_value, p.lab_error, p.lab_unit,
                           _interval(lo, hi, fac), kinds.get(name, "")))
         if name == "tracking_var":

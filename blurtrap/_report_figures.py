@@ -133,8 +133,10 @@ def ranking_figure(diagnosis):
 def before_after_figure(base, after, recs, effect: str):
     from . import plotting as bp
 
-    return bp.residuals_before_after(base, after, recs, n_blocks=n_blocks_for(after, recs),
-                                     labels=(f"before ({base.model})", f"after (+ {effect})"))
+    fig = bp.residuals_before_after(base, after, recs, n_blocks=n_blocks_for(after, recs),
+                                    labels=("before", f"after adding {effect}"))
+    fig.set_size_inches(9.0, 6.0)  # room for the titles (model, recordings, gof)
+    return fig
 
 
 class Figures:
