@@ -64,7 +64,7 @@ def calibrate_command(args) -> int:
     if report is not None:
         from ._report import write_calibration_report as write
 
-        report = write(report, result, str(path))
+        report = write(report, result, str(path), posterior=post)
     if args.json:
         out = result.to_dict() | ({"report": report} if report else {})
         if post is not None:

@@ -181,8 +181,9 @@ def _finish(out: Path, lines, figs, json_name: str, payload) -> dict:
             "files": ["report.md", json_name] + figs.files, "failed": list(figs.failed)}
 
 
-def write_calibration_report(out: Path, fit, source) -> dict:
-    """``report.md``, ``result.json`` and the figures of one calibration into `out`.
+def write_calibration_report(out: Path, fit, source, posterior=None) -> dict:
+    """``report.md``, ``result.json`` and the figures of one calibration into `out`; with
+    `posterior` (``calibrate --posterior``) its summary and its samples' statistics too.
 
     **Returns:** ``{"dir", "report", "files", "failed"}`` (the files written, relative to
     `out`, and the figures that failed)."""
@@ -190,8 +191,13 @@ def write_calibration_report(out: Path, fit, source) -> dict:
     figs = rf.Figures(out)
     rf.recording_figures(figs, recs, fit)
     lines = _header("blurtrap calibration report", source, recs)
-    lines += ["## Result", ""] + fit_section(fit, recs) + _figure_lines(figs)
-    return _finish(out, lines, figs, "result.json", fit.to_dict())
+    lines += ["## Result", ""] + fit_section(fit, recs)
+    payload = fit.to_dict()
+    if posterior is not None:
+        lines += ["## Posterior (emcee)", "", "```", posterior.summary(), "```", ""]
+        payload["posterior"] = posterior.to_dict()
+    lines += _figure_lines(figs)
+    return _finish(out, lines, figs, "result.json", payload)
 
 
 def _ranking_table(d) -> list[str]:

@@ -239,3 +239,44 @@ def test_anti_aliased_photodiode_fit_is_drawn(tmp_path):
     figs.attempt("spectrum_0", lambda: spectrum_figure(in_metres(rec, fit), fit, "r"), "c")
     assert figs.failed == [] and figs.files == ["spectrum_0.png"]
     _image_ok(tmp_path / "spectrum_0.png")
+
+
+def test_failed_figure_is_reported_and_exits_nonzero(manifest, tmp_path, capsys, monkeypatch):
+    """A figure that raises leaves the rest of the report, is listed in report.md and on
+    stderr, and the command exits 1 (the report is incomplete)."""
+    import blurtrap._report_figures as rf
+
+    def broken(*a, **kw):
+        raise RuntimeError("no spectrum today")
+
+    monkeypatch.setattr(rf, "spectrum_figure", broken)
+    out = tmp_path / "rep"
+    capsys.readouterr()
+    assert main(["calibrate", str(manifest), "--method", "equipartition", "--report",
+                 str(out)]) == 1
+    cap = capsys.readouterr()
+    assert "warning: report figure spectrum_0.png: RuntimeError: no spectrum today" in cap.err
+    report = (out / "report.md").read_text()
+    assert "**Figures that failed:**" in report and "no spectrum today" in report
+    assert "| k (stiffness) |" in report and not (out / "spectrum_0.png").exists()
+
+
+def test_posterior_goes_into_the_report(manifest, tmp_path):
+    """calibrate --posterior --report: the posterior's summary in report.md, its dict in
+    result.json (a stand-in posterior: the sampler itself is tested elsewhere)."""
+    from blurtrap._report import write_calibration_report
+
+    class FakePosterior:
+        def summary(self):
+            return "posterior: k median 0.01 pN/nm"
+
+        def to_dict(self):
+            return {"method": "posterior", "k": 1e-5}
+
+    k, g = 1e-5, 1.37e-8
+    fit = _result(["k", "gamma"], [k, g], [1e-7, 1e-10], [k], [1e-7])
+    info = write_calibration_report(tmp_path, fit, str(manifest), posterior=FakePosterior())
+    report = (tmp_path / "report.md").read_text()
+    assert "## Posterior (emcee)" in report and "posterior: k median 0.01 pN/nm" in report
+    assert json.loads((tmp_path / "result.json").read_text())["posterior"]["k"] == 1e-5
+    assert info["failed"] == [] and "spectrum_0.png" in info["files"]
