@@ -249,7 +249,23 @@ def _before_after(d, recs, figs: rf.Figures) -> list[str]:
                      f"PSD residuals (data/model, log-binned mean with its expected +-2 sd "
                      f"band) of the model {d.model} (before) and with {top.effect} added "
                      "(after).")
-    return [f"## Refit with `{top.effect}` added", ""] + fit_section(after, recs)
+    return ([f"## Refit with `{top.effect}` added", ""] + change_table(d.fit, after) + [""]
+            + fit_section(after, recs))
+
+
+def change_table(before, after) -> list[str]:
+    """The parameters both fits share, before and after adding the effect (lab units), and
+    the change in standard errors of the refit."""
+    lines = [f"| parameter | {before.model} | {after.model} | unit | change [SE] |",
+             "|---|---|---|---|---|"]
+    for name in [n for n in before.param_names if n in after.param_names]:
+        b, a = before[name], after[name]
+        z = (a.lab_value - b.lab_value) / a.lab_error if a.lab_error > 0 else math.nan
+        lines.append(f"| {name} | {_num(b.lab_value, '.6g')} | {_num(a.lab_value, '.6g')} | "
+                     f"{a.lab_unit} | {_num(z, '+.2f')} |")
+    g = [f.gof.get("p_value", math.nan) for f in (before, after)]
+    lines.append(f"| goodness of fit p | {_num(g[0], '.3g')} | {_num(g[1], '.3g')} | | |")
+    return lines
 
 
 def write_diagnosis_report(out: Path, diagnosis, source) -> dict:

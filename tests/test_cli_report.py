@@ -132,6 +132,16 @@ def test_diagnose_report_names_the_missing_effect(manifest, tmp_path, capsys):
     assert "Missing effect: **`tracking_noise`**" in report
     assert re.search(r"^\| 1 \| `tracking_noise` \|", report, flags=re.M)
     assert "## Refit with `tracking_noise` added" in report
+    # before -> after of k, in lab units, with the change in the refit's standard errors
+    m = re.search(r"^\| k \| ([^|]+) \| ([^|]+) \| pN/nm \| ([^|]+) \|", report, flags=re.M)
+    assert m, report
+    before_k, after_k = (float(v) for v in m.groups()[:2])
+    assert before_k == pytest.approx(d["fit"]["k"] * 1e3, rel=1e-5)
+    assert after_k > before_k  # white noise read as trap motion made k too small
+    refit = report.split("## Refit with")[1].split("## Fit of the model")[0]
+    k_se = float(re.search(r"^\| k \(stiffness\) \| [^|]+ \| ([^|]+) \|", refit,
+                           flags=re.M).group(1))
+    assert abs(after_k - 0.01) < 3 * k_se  # the simulated k, within 3 SE of the refit
     # the base fit's k, to the printed precision, and the refit's eps row
     base_k = d["fit"]["k"] * 1e3
     assert f"| k (stiffness) | {base_k:.6g} |" in report
