@@ -79,6 +79,14 @@ def _add_debug(p):
                    help="show full tracebacks on error")
 
 
+def _add_report(p, what=""):
+    p.add_argument("--report", metavar="DIR", default=None,
+                   help="also write DIR/report.md (lab units), the JSON result and PNG figures "
+                   f"(spectrum with fit and residuals, frame histogram per recording{what}); "
+                   "DIR is created if missing; files of those names in DIR are overwritten, "
+                   "other files are left alone")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="blurtrap", description=__doc__,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -181,6 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "parameters; default 32)")
     c.add_argument("--json", action="store_true",
                    help="print the result as one JSON object (SI units, to_dict())")
+    _add_report(c)
     _add_debug(c)
 
     g = sub.add_parser(
@@ -199,6 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--alpha", type=float, default=0.05,
                    help="family-wise false-alarm rate (default 0.05)")
     g.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_report(g, "; the ranking; residuals before/after adding the best candidate")
     _add_debug(g)
     _add_design_parser(sub)
     return p
@@ -348,93 +358,9 @@ def _simulate(args) -> int:
 # ------------------------------------------------------------------------------------------
 # calibrate
 # ------------------------------------------------------------------------------------------
-def _check_input_path(path) -> None:
-    """A clear message for paths the loaders cannot take on the command line."""
-    if not path.exists():
-        raise CliError(f"{path}: no such file")
-    if path.is_dir():
-        raise CliError(f"{path} is a directory; give its manifest JSON (e.g. {path}/manifest.json)")
-    if path.suffix.lower() in (".csv", ".txt", ".tsv"):
-        raise CliError(
-            f"{path}: a bare CSV does not say its frame interval, exposure or position unit; "
-            "write a manifest JSON that lists it with those (see README, Data format), or load "
-            "it in Python with blurtrap.load_csv(path, frame_interval=..., exposure=..., "
-            "position_unit=...)")
-
-
 def format_result(result) -> str:
     """A readable lab-unit table of a ``CalibrationResult`` (its ``summary()``)."""
     return result.summary()
-
-
-def _calibrate(args) -> int:
-    from pathlib import Path
-
-    from .inference import calibrate
-
-    path = Path(args.manifest)
-    _check_input_path(path)
-    kw = dict(method=args.method, model=args.model, likelihood=args.likelihood)
-    if args.k_mode is not None:
-        kw["k"] = args.k_mode
-    if args.n_blocks is not None:
-        kw["n_blocks"] = args.n_blocks
-    if args.f_range is not None:
-        kw["f_range"] = tuple(args.f_range)
-    if args.friction is not None:
-        kw["friction"] = args.friction
-    if args.exclude:
-        kw["excluded_ranges"] = [tuple(r) for r in args.exclude]
-    kw["lines"] = args.lines
-    if args.fix:
-        kw["fixed"] = _fixed_arg(args.fix)
-    if args.diffusion is not None:  # calibrate checks that the method uses it
-        if not (0 < args.diffusion <= 1e4):
-            raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
-                           f"be > 0 and plausible (<= 1e4); got {args.diffusion:g}")
-        kw["diffusion"] = args.diffusion * 1e-12
-    result = calibrate(str(path), **kw)
-    post = None
-    if args.posterior:
-        from .inference import sample_posterior
-
-        if not args.json:
-            print("sampling the posterior (emcee)...", file=sys.stderr)
-        post = sample_posterior(str(path), model=args.model, n_steps=args.steps,
-                                n_walkers=args.walkers, k=kw.get("k"),
-                                progress=not args.json and sys.stderr.isatty())
-    if args.json:
-        out = result.to_dict()
-        if post is not None:
-            out["posterior"] = post.to_dict()
-        print(dumps_json(out))
-    else:
-        print(format_result(result))
-        if post is not None:
-            print(post.summary())
-    return 0
-
-
-def _fixed_arg(items) -> dict:
-    """``--fix NAME=VALUE[+-SE]`` in lab units -> calibrate's ``fixed`` in SI."""
-    from .inference._result import LAB
-
-    out = {}
-    for item in items:
-        name, sep, rest = item.partition("=")
-        name = name.strip()
-        value, _, se = rest.partition("+-")
-        fac = LAB.get(name, (1.0, ""))[0]
-        try:
-            v = float(value) / fac
-            e = float(se) / fac if se else 0.0
-        except ValueError:
-            raise CliError(f"--fix takes NAME=VALUE or NAME=VALUE+-SE in lab units (e.g. "
-                           f"tracking_var=0 or gamma=0.0095+-0.0003); got {item!r}") from None
-        if not sep or not name:
-            raise CliError(f"--fix takes NAME=VALUE; got {item!r}")
-        out[name] = (v, e)
-    return out
 
 
 def _model_arg(text: str) -> str:
@@ -447,27 +373,6 @@ def _model_arg(text: str) -> str:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
-
-
-def _diagnose(args) -> int:
-    from pathlib import Path
-
-    from .diagnostics import diagnose
-
-    path = Path(args.manifest)
-    _check_input_path(path)
-    d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
-    if args.json:
-        out = d.to_dict()
-        out["gof"] = {k: out["gof"][k] for k in ("statistic", "dof", "p_value")}
-        out["gof"]["p"] = out["gof"]["p_value"]
-        print(dumps_json(out))
-    else:
-        print(d.summary())
-        print()
-        print(f"fit of the model {d.model}:")
-        print(d.fit.summary())
-    return 0  # a diagnosis was made; adequacy is in the output
 
 
 # ------------------------------------------------------------------------------------------
@@ -511,9 +416,13 @@ def main(argv=None) -> int:
         if args.command == "simulate":
             return _simulate(args)
         if args.command == "calibrate":
-            return _calibrate(args)
+            from ._cli_commands import calibrate_command
+
+            return calibrate_command(args)
         if args.command == "diagnose":
-            return _diagnose(args)
+            from ._cli_commands import diagnose_command
+
+            return diagnose_command(args)
         if args.command == "design":
             return _design(args)
         raise CliError(f"unknown command {args.command!r}")  # pragma: no cover

@@ -217,7 +217,9 @@ class TrapModel(eqx.Module):
 
 def get_model(model) -> TrapModel:
     """Resolve a model: a ``TrapModel``, a name (``naive``, ``naive_aliased``, ``blur``,
-    ``standard``) or a name with effects (``"standard+drift+line_noise"``)."""
+    ``standard``, or ``photodiode_aa``: tracking noise without exposure average or folding, the
+    model calibrate gives an anti-aliased photodiode) or a name with effects
+    (``"standard+drift+line_noise"``)."""
     if isinstance(model, TrapModel):
         return model
     if model is None:
@@ -228,6 +230,7 @@ def get_model(model) -> TrapModel:
         "naive_aliased": TrapModel(blur=False, alias=True, noise=False, name="naive_aliased"),
         "blur": TrapModel(blur=True, alias=True, noise=False, name="blur"),
         "standard": TrapModel(blur=True, alias=True, noise=True, name="standard"),
+        "photodiode_aa": TrapModel(blur=False, alias=False, noise=True, name="photodiode_aa"),
     }
     if base not in table:
         raise ValueError(f"model must be one of {sorted(table)} (optionally '+effect'); "

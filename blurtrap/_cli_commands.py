@@ -1,0 +1,152 @@
+"""The bodies of ``blurtrap calibrate`` and ``blurtrap diagnose`` (their parsers are in
+:mod:`blurtrap.cli`): load, fit or diagnose, print the lab-unit table or one JSON object, and
+write the ``--report DIR`` (:mod:`blurtrap._report`)."""
+
+from __future__ import annotations
+
+import sys
+
+from .cli import CliError, dumps_json
+
+
+def _check_input_path(path) -> None:
+    """A clear message for paths the loaders cannot take on the command line."""
+    if not path.exists():
+        raise CliError(f"{path}: no such file")
+    if path.is_dir():
+        raise CliError(f"{path} is a directory; give its manifest JSON (e.g. {path}/manifest.json)")
+    if path.suffix.lower() in (".csv", ".txt", ".tsv"):
+        raise CliError(
+            f"{path}: a bare CSV does not say its frame interval, exposure or position unit; "
+            "write a manifest JSON that lists it with those (see README, Data format), or load "
+            "it in Python with blurtrap.load_csv(path, frame_interval=..., exposure=..., "
+            "position_unit=...)")
+
+
+def calibrate_command(args) -> int:
+    """``blurtrap calibrate``: fit, print the table (or JSON), write the report."""
+    from pathlib import Path
+
+    from .inference import calibrate
+
+    path = Path(args.manifest)
+    _check_input_path(path)
+    report = _report_dir(args)
+    kw = dict(method=args.method, model=args.model, likelihood=args.likelihood)
+    if args.k_mode is not None:
+        kw["k"] = args.k_mode
+    if args.n_blocks is not None:
+        kw["n_blocks"] = args.n_blocks
+    if args.f_range is not None:
+        kw["f_range"] = tuple(args.f_range)
+    if args.friction is not None:
+        kw["friction"] = args.friction
+    if args.exclude:
+        kw["excluded_ranges"] = [tuple(r) for r in args.exclude]
+    kw["lines"] = args.lines
+    if args.fix:
+        kw["fixed"] = _fixed_arg(args.fix)
+    if args.diffusion is not None:  # calibrate checks that the method uses it
+        if not (0 < args.diffusion <= 1e4):
+            raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
+                           f"be > 0 and plausible (<= 1e4); got {args.diffusion:g}")
+        kw["diffusion"] = args.diffusion * 1e-12
+    result = calibrate(str(path), **kw)
+    post = None
+    if args.posterior:
+        from .inference import sample_posterior
+
+        if not args.json:
+            print("sampling the posterior (emcee)...", file=sys.stderr)
+        post = sample_posterior(str(path), model=args.model, n_steps=args.steps,
+                                n_walkers=args.walkers, k=kw.get("k"),
+                                progress=not args.json and sys.stderr.isatty())
+    if report is not None:
+        from ._report import write_calibration_report as write
+
+        report = write(report, result, str(path), posterior=post)
+    if args.json:
+        out = result.to_dict() | ({"report": report} if report else {})
+        if post is not None:
+            out["posterior"] = post.to_dict()
+        print(dumps_json(out))
+    else:
+        print(result.summary())
+        if post is not None:
+            print(post.summary())
+    return _report_done(report, args.json)
+
+
+def _fixed_arg(items) -> dict:
+    """``--fix NAME=VALUE[+-SE]`` in lab units -> calibrate's ``fixed`` in SI."""
+    from .inference._result import LAB
+
+    out = {}
+    for item in items:
+        name, sep, rest = item.partition("=")
+        name = name.strip()
+        value, _, se = rest.partition("+-")
+        fac = LAB.get(name, (1.0, ""))[0]
+        try:
+            v = float(value) / fac
+            e = float(se) / fac if se else 0.0
+        except ValueError:
+            raise CliError(f"--fix takes NAME=VALUE or NAME=VALUE+-SE in lab units (e.g. "
+                           f"tracking_var=0 or gamma=0.0095+-0.0003); got {item!r}") from None
+        if not sep or not name:
+            raise CliError(f"--fix takes NAME=VALUE; got {item!r}")
+        out[name] = (v, e)
+    return out
+
+
+def diagnose_command(args) -> int:
+    """``blurtrap diagnose``: diagnose, print the verdict and fit (or JSON), write the report."""
+    from pathlib import Path
+
+    from .diagnostics import diagnose
+
+    path = Path(args.manifest)
+    _check_input_path(path)
+    report = _report_dir(args)
+    d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
+    if report is not None:
+        from ._report import write_diagnosis_report as write
+
+        report = write(report, d, str(path))
+    if args.json:
+        out = d.to_dict() | ({"report": report} if report else {})
+        out["gof"] = {k: out["gof"][k] for k in ("statistic", "dof", "p_value")}
+        out["gof"]["p"] = out["gof"]["p_value"]
+        print(dumps_json(out))
+    else:
+        print(d.summary())
+        print()
+        print(f"fit of the model {d.model}:")
+        print(d.fit.summary())
+        best = d.best
+        if best is not None and best.fit is not None:  # add and refit, from the command line
+            print(f"\nfit with {best.effect} added (model {best.fit.model}):")
+            print(best.fit.summary())
+    return _report_done(report, args.json)  # a diagnosis was made; adequacy is in the output
+
+
+def _report_done(report, quiet: bool) -> int:
+    """Where the report went; exit code 1 when one of its figures failed."""
+    if report is not None:
+        for f in report["failed"]:
+            print(f"warning: report figure {f}", file=sys.stderr)
+        if not quiet:
+            print(f"report: {report['report']} ({len(report['files'])} files)")
+    return 1 if report is not None and report["failed"] else 0
+
+
+def _report_dir(args):
+    """--report DIR, checked (and created) before any fit; None without --report."""
+    if args.report is None:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: never a GUI window from the command line
+    from ._report import report_dir
+
+    return report_dir(args.report)
