@@ -79,14 +79,14 @@ def calibrate_command(args) -> int:
 
 def _fixed_arg(items) -> dict:
     """``--fix NAME=VALUE[+-SE]`` in lab units -> calibrate's ``fixed`` in SI."""
-    from .inference._result import LAB
+    from .effects import lab_units
 
     out = {}
     for item in items:
         name, sep, rest = item.partition("=")
         name = name.strip()
         value, _, se = rest.partition("+-")
-        fac = LAB.get(name, (1.0, ""))[0]
+        fac = lab_units(name)[0]
         try:
             v = float(value) / fac
             e = float(se) / fac if se else 0.0

@@ -65,14 +65,14 @@ def _row(name, value, error, unit, interval="-", kind="") -> str:
 def parameter_table(fit) -> list[str]:
     """The fitted parameters in lab units (k, gamma, D, eps, f_c, effect parameters; Rd and
     Rf for volts), each with its standard error and 95 % interval."""
-    from .inference._result import LAB
+    from .effects import lab_units
 
     ivs, kinds = fit.intervals, fit.interval_kinds
     lines = ["| parameter | value | +- SE | unit | 95 % interval |", "|---|---|---|---|---|"]
     for name in fit.param_names:
         p = fit[name]
         base = name.split("[")[0]
-        fac = LAB.get(base, (1.0, ""))[0]
+        fac = lab_units(base)[0]
         lo, hi = ivs.get(name, (math.nan, math.nan))
         sym, what = _TABLE_NAMES.get(base, (base, p.description))
         label = f"{sym}{name[len(base):]} ({what})"

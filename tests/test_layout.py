@@ -14,14 +14,16 @@ PKG = pathlib.Path(__file__).resolve().parents[1] / "blurtrap"
 # import physics (which imports jax).
 ALLOWED = {
     "physics": {"_constants"},
-    "simulate": {"physics", "_constants"},
+    "effects": {"physics", "_constants"},
+    "simulate": {"physics", "effects", "_constants"},
     "data": {"_constants"},
-    "inference": {"physics", "data", "_config", "_constants"},
-    "diagnostics": {"physics", "data", "inference", "simulate", "_config", "_constants"},
-    "design": {"physics", "data", "inference", "simulate", "_config", "_constants"},
-    "sweeps": {"physics", "inference", "simulate", "_config", "_constants"},
-    "plotting": {"physics", "data", "inference", "diagnostics", "design", "simulate", "_config",
-                 "_constants"},
+    "inference": {"physics", "effects", "data", "_config", "_constants"},
+    "diagnostics": {"physics", "effects", "data", "inference", "simulate", "_config",
+                    "_constants"},
+    "design": {"physics", "effects", "data", "inference", "simulate", "_config", "_constants"},
+    "sweeps": {"physics", "effects", "inference", "simulate", "_config", "_constants"},
+    "plotting": {"physics", "effects", "data", "inference", "diagnostics", "design", "simulate",
+                 "_config", "_constants"},
 }
 
 

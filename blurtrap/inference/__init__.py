@@ -1,14 +1,14 @@
 """Estimators: variances, spectra, exact and Whittle likelihoods, joint fits."""
 
+from ..effects import EFFECTS as EFFECTS
+from ..effects import AbstractEffect as AbstractEffect
+from ..effects import make_effect as make_effect
 from ._allan import AllanVariance as AllanVariance
 from ._allan import allan_variance as allan_variance
 from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
 from ._calibrate import calibrate as calibrate
 from ._calibrate import moment_start as moment_start
-from ._effects import EFFECTS as EFFECTS
-from ._effects import AbstractEffect as AbstractEffect
-from ._effects import make_effect as make_effect
 from ._fit import FitOutput as FitOutput
 from ._fit import fit_ml as fit_ml
 from ._likelihood import (

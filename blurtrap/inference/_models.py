@@ -25,11 +25,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ..effects import EFFECTS, AbstractEffect, make_effect
 from ..physics._blur import _blur_factor, _rho_b
 from ..physics._constants import BOLTZMANN
 from ..physics._effects import fold_sum, water_viscosity
 from ..physics._spectra import _expected_block_periodogram, _psd_coeffs
-from ._effects import EFFECTS, AbstractEffect, make_effect
 
 _FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)

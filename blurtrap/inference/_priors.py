@@ -33,24 +33,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import float64_scope, x64_context
+from ..effects import QUANTITIES
 from ..physics import faxen_factor, stokes_friction, water_viscosity
 
 # Wide physical bounds of the default priors (SI), core and effect parameters: log-uniform,
 # except ``tracking_var`` (uniform on [0, 1e-10] m^2; see :class:`Uniform`).
-DEFAULT_BOUNDS = {
-    "k": (1e-10, 1.0),  # 1e-7 .. 1e3 pN/nm
-    "c": (1e-10, 1e2),  # N/m/W
-    "gamma": (1e-13, 1e-3),  # N s/m
-    "tracking_var": (0.0, 1e-10),  # m^2: 0 .. 100 um^2
-    "drift_diffusion": (1e-30, 1e-8),  # m^2/s: 1e-12 .. 1e10 nm^2/s
-    "line_amplitude": (1e-15, 1e-5),  # m
-    "rise_fraction": (1e-6, 0.5),  # of the exposure
-    "f3db": (1.0, 1e8),  # Hz
-    "diode_alpha": (1e-6, 1.0),
-    "hydro_radius": (1e-9, 1e-3),  # m
-    "power_offset": (1e-9, 10.0),  # W
-    "heating": (1e-3, 1e4),  # K/W
-}
+DEFAULT_BOUNDS = {n: q.bounds for n, q in QUANTITIES.items() if q.bounds is not None}
 
 
 class Prior(eqx.Module):

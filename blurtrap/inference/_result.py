@@ -8,36 +8,15 @@ from typing import Any
 
 import numpy as np
 
+from ..effects import QUANTITIES
 from ..physics._constants import BOLTZMANN
 
 #: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
 Z95 = 1.959963984540054
 
-# The one table of lab units (reports, plots, CLI): name -> (factor from SI, lab unit)
-LAB = {
-    "k": (1e3, "pN/nm"),
-    "c": (1e3, "pN/nm/W"),
-    "gamma": (1e6, "pN s/um"),
-    "diffusion": (1e12, "um^2/s"),
-    "tracking_var": (1e18, "nm^2"),
-    "tau": (1e3, "ms"),
-    "corner_frequency": (1.0, "Hz"),
-    "force_per_nm": (1e12, "pN"),
-    "drift_diffusion": (1e18, "nm^2/s"),
-    "line_amplitude": (1e9, "nm"),
-    "hydro_radius": (1e6, "um"),
-    "power_offset": (1e3, "mW"),
-    "heating": (1.0, "K/W"),
-    "f3db": (1.0, "Hz"),
-    "rise_fraction": (1.0, ""),
-    "diode_alpha": (1.0, ""),
-    "exposure": (1e3, "ms"),
-    "frame_interval": (1e3, "ms"),
-    "position": (1e9, "nm"),
-    "laser_power": (1e3, "mW"),
-    "displacement_sensitivity": (1e9, "nm/V"),
-    "force_sensitivity": (1e12, "pN/V"),
-}
+#: lab units (reports, plots, CLI): name -> (factor from SI, lab unit), from the one table
+#: of quantities in :mod:`blurtrap.effects`
+LAB = {n: (q.lab_factor, q.lab_unit) for n, q in QUANTITIES.items()}
 
 
 def _json_float(v):
@@ -46,19 +25,8 @@ def _json_float(v):
     return v if math.isfinite(v) else None
 
 
-#: SI unit and description of the core parameters (lab units: LAB)
-DESCRIBE = {
-    "k": ("N/m", "trap stiffness"),
-    "c": ("N/m/W", "stiffness per laser power (k = c P)"),
-    "gamma": ("N s/m", "friction coefficient"),
-    "tracking_var": ("m^2", "tracking-error variance eps^2"),
-    "diffusion": ("m^2/s", "diffusion coefficient D = kT/gamma"),
-    "corner_frequency": ("Hz", "corner frequency f_c = k/(2 pi gamma)"),
-    "displacement_sensitivity": ("m/V", "displacement sensitivity Rd (metres per volt)"),
-    "force_sensitivity": ("N/V", "force sensitivity Rf = k Rd (newtons per volt)"),
-    "tau": ("s", "relaxation time tau = gamma/k"),
-    "force_per_nm": ("N", "force at 1 nm from the trap centre (k x 1 nm)"),
-}
+#: SI unit and description of every quantity (lab units: LAB)
+DESCRIBE = {n: (q.unit, q.description) for n, q in QUANTITIES.items()}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from ..inference._result import LAB
+from ..effects import lab_units
 from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ _SYMBOLS = {"k": "k", "c": "c = k/P", "gamma": "gamma", "diffusion": "D",
             "tracking_var": "eps^2", "tau": "tau", "corner_frequency": "f_c", "exposure": "W",
             "frame_interval": "dt", "position": "x", "laser_power": "P"}
 # (factor from SI, lab unit, symbol), from the package's one table of lab units
-LAB_UNITS = {name: (*LAB[name], sym) for name, sym in _SYMBOLS.items()}
+LAB_UNITS = {name: (*lab_units(name), sym) for name, sym in _SYMBOLS.items()}
 
 NM = 1e9
 NM2 = 1e18

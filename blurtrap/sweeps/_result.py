@@ -7,10 +7,8 @@ import itertools
 
 import numpy as np
 
+from ..effects import lab_units
 from ._grid import INJECTIONS, PARAMS, Grid
-
-#: statistics shown by ``summary()`` (name, lab factor per fitted parameter)
-_LAB = {"k": (1e3, "pN/nm"), "gamma": (1e6, "pN s/um"), "tracking_var": (1e18, "nm^2")}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +100,7 @@ class SweepResult:
         parameter its mean, bias [%], SD/SE and 95 % coverage, and the failures."""
         head = [_lab_label(d) for d in self.dims]
         for p in params:
-            fac, unit = _LAB[p]
+            fac, unit = lab_units(p)
             head += [f"{p} mean [{unit}]", f"{p} bias [%]", f"{p} SD/SE", f"{p} cover"]
         head += ["ok/items", "failures"]
         lines = [_fixed_line(self.fixed, self.attrs), " | ".join(head)]
@@ -111,7 +109,7 @@ class SweepResult:
         for idx, labels in self._rows():
             cells = [_lab_value(d, v) for d, v in labels.items()]
             for p in params:
-                fac, _ = _LAB[p]
+                fac, _ = lab_units(p)
                 cells += [f"{self.data['mean_' + p][idx] * fac:.5g}",
                           f"{self.data['bias_' + p][idx]:+.2f}",
                           f"{self.data['sd_se_' + p][idx]:.3f}",

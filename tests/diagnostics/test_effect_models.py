@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from blurtrap.inference._effects import Hydrodynamics
+from blurtrap.effects import Hydrodynamics
 from blurtrap.inference._models import TrapModel
 from blurtrap.physics import BOLTZMANN
 

@@ -1,0 +1,76 @@
+"""The ``hydrodynamics`` effect (DESIGN section 3): its parameters, hooks and measured detectability."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ..physics import POLYSTYRENE_DENSITY, hydro_lorentzian, water_density, water_viscosity
+from ..physics._constants import BOLTZMANN
+from ._base import AbstractEffect, Param
+
+
+class Hydrodynamics(AbstractEffect):
+    """Frequency-dependent friction of a sphere of hydrodynamic radius ``hydro_radius`` [m]
+    (Berg-Sorensen & Flyvbjerg 2004, eq. 12; fluid inertia + Basset force; water viscosity and
+    density at T, ``blurtrap.physics.water_viscosity`` / ``water_density``). Faxen's law near a
+    surface rescales gamma (which stays free: ``gamma`` is the zero-frequency friction), so a
+    physical fit has ``hydro_radius <= gamma/(6 pi eta)``; ``diagnose`` rejects candidates that
+    violate it by more than 50 %. Simulate it with ``blurtrap.simulate.HydrodynamicFriction``
+    (``method="spectral"``).
+
+    Static options: ``distance`` [m] from the bead centre to a surface (default ``None``:
+    bulk); with it the frequency dependence is that of Tolic-Norrelykke et al. (2006), eq. D6
+    (``blurtrap.physics.complex_friction``), meant for ``distance >~ 1.5 hydro_radius``.
+    ``bead_density`` [kg/m^3] (default polystyrene, 1050).
+
+    Signature: relative to the best Lorentzian a high-frequency deficit growing like
+    sqrt(f/f_nu), f_nu = nu/(pi R^2) (~130 kHz for R = 1.5 um). Not visible in camera data.
+    Detectability (measured, benchmarks/RESULTS_diagnose.md; photodiode, W -> 0, k = 0.05 pN/nm,
+    eps = 0.2 nm): the standard model failed in every record for every radius tried (6/6 each
+    at R = 1.5, 1.0, 0.5 and 0.25 um, 200 kHz, 2^16 samples = 0.33 s; gof p < 1e-240 at
+    1.5 um, a high-frequency candidate at p < 1e-9 at 0.25 um). Naming it correctly is harder
+    than detecting it: a 2-parameter photodiode filter mimics the deficit to within a few
+    log-likelihood units (expected gap 2.0 per 2^14 samples at 100 kHz, R = 1.5 um). Ranked
+    first, refit adequate with k and gamma within 3 SE (6 seeds each, rough rates): R = 1.5 um
+    6/6 and R = 1.0 um 6/6 at 200 kHz, 2^16 samples; R = 0.5 um 4/6 and R = 0.25 um 3/6 (the
+    others named detector_filter); R = 1.5 um at 100 kHz, 2^14 samples 5/6. So beads of
+    R >= 1 um are named reliably with >= 2^16 samples at 200 kHz; smaller beads need longer
+    records than that to be named rather than merely detected."""
+
+    name: ClassVar[str] = "hydrodynamics"
+    kind: ClassVar[str] = "friction"
+    params: ClassVar = (Param("hydro_radius", "m", 1e6, "um", "hydrodynamic radius",
+                              bounds=(1e-9, 1e-3)),)
+    signature: ClassVar[str] = "small high-frequency excess over the Lorentzian"
+
+    distance: float | None = eqx.field(static=True, default=None)
+    bead_density: float = eqx.field(static=True, default=POLYSTYRENE_DENSITY)
+
+    def __check_init__(self):
+        checks = [("bead_density", self.bead_density, "kg/m^3")]
+        if self.distance is not None:
+            checks.append(("distance", self.distance, "m (or None: bulk)"))
+        for nm, v, unit in checks:
+            try:
+                ok = not isinstance(v, bool) and 0 < float(v) < float("inf")
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise ValueError(f"{nm} must be a finite number > 0 {unit}; got {nm} = {v!r}")
+
+    def lorentzian(self, f, sigma2, tau, temp, extras):
+        radius = extras["hydro_radius"]
+        eta = water_viscosity(temp)
+        rho = water_density(temp)
+        k = BOLTZMANN * temp / sigma2
+        gamma = tau * k
+        d = BOLTZMANN * temp / gamma
+        fc = k / (2.0 * jnp.pi * gamma)
+        f_nu = eta / rho / (jnp.pi * radius**2)
+        m_star = (4.0 / 3.0 * self.bead_density + 2.0 / 3.0 * rho) * jnp.pi * radius**3
+        f_m = gamma / (2.0 * jnp.pi * m_star)
+        x = 0.0 if self.distance is None else radius / self.distance
+        return hydro_lorentzian(f, d, fc, f_nu, f_m, x)

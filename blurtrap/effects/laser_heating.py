@@ -1,0 +1,20 @@
+"""The ``laser_heating`` effect (DESIGN section 3): its parameters, hooks and measured detectability."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from ._base import AbstractEffect, Param
+
+
+class LaserHeating(AbstractEffect):
+    """Heating ``T = T0 + b P`` at the focus (``heating`` b [K/W]); gamma follows the water
+    viscosity eta(T) and kT rises. Signature: curvature in variance-vs-power fits and gamma
+    falling with power. Typical b ~ 10-20 K/W at 1064 nm: detectable across >= 4 powers up to
+    ~1 W."""
+
+    name: ClassVar[str] = "laser_heating"
+    kind: ClassVar[str] = "relation"
+    params: ClassVar = (Param("heating", "K/W", 1.0, "K/W", "heating coefficient b",
+                              bounds=(1e-3, 1e4)),)
+    signature: ClassVar[str] = "gamma falls with laser power"

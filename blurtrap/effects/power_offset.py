@@ -1,0 +1,18 @@
+"""The ``power_offset`` effect (DESIGN section 3): its parameters, hooks and measured detectability."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from ._base import AbstractEffect, Param
+
+
+class PowerOffset(AbstractEffect):
+    """``k = c (P - P0)``: the stiffness-vs-power line misses the origin by ``power_offset``
+    [W] (a power threshold or a calibration offset of the power meter)."""
+
+    name: ClassVar[str] = "power_offset"
+    kind: ClassVar[str] = "relation"
+    params: ClassVar = (Param("power_offset", "W", 1e3, "mW", "power offset P0",
+                              bounds=(1e-9, 10.0)),)
+    signature: ClassVar[str] = "k-vs-power line misses the origin"
