@@ -70,6 +70,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         interval_source=interval_source,
     )
 
+
 def _interval_source(nll, args, scale, out, held, hessian="auto"):
     """Profile intervals of the fit (of its free parameters when some are held; none when
     a held input has an error: its Wald errors include the propagated input error, which a
@@ -88,6 +89,7 @@ def _k_mode_of(layout):
     if layout.linear_power:
         return "linear_power"
     return "shared" if layout.n_k == 1 else "per_group"
+
 
 def _given_intervals(intervals):
     """An ``interval_source`` for intervals already computed (all profile intervals)."""

@@ -131,7 +131,6 @@ def calibrate(
     return res
 
 
-
 def _default_k_mode(recs):
     powers = [r.laser_power for r in recs]
     if all(p is not None for p in powers) and len({float(p) for p in powers}) > 1:

@@ -75,6 +75,11 @@ def _outlier_sentence(recs, z_min=5.0) -> str:
                     + hides)
     return ""
 
+
+#: saturation: a pile-up of at least this many frames at exactly the minimum or maximum value
+#: that holds more than twice as many frames as the next value inwards (an unclipped tail
+#: thins out towards the extreme: a continuous trace has each value once, a quantised one
+#: fewer frames on its outermost level than on the next)
 _SAT_MIN_FRAMES = 3
 #: refuse above this fraction of saturated frames, or when the clipped tails lower the
 #: variance by more than _SAT_MAX_BIAS_SE standard errors of the frame variance

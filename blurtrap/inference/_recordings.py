@@ -50,6 +50,7 @@ def as_recordings(data: Any) -> list:
         warn_if_float32("positions", r.positions)
     return recs
 
+
 #: a fitted gamma outside [1/3, 3] x the Stokes friction of the known bead is flagged
 _STOKES_MAX_RATIO = 3.0
 

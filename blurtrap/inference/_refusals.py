@@ -31,6 +31,7 @@ def _no_temporal_information_message(recs, info):
         "record an exposure series or a power series."
     )
 
+
 def _slow_relaxation_hint(recs, values, names):
     """A sentence when the fitted tau is not short compared with the record (else '')."""
     if "gamma" not in names or "k" not in names:

@@ -111,6 +111,7 @@ def _fit_variance(recs, layout, model, method_name, notes):
     return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
                      interval_source=_given_intervals(intervals))
 
+
 def _fit_allan(recs, layout, model, notes):
     """k, gamma, eps^2 from the overlapping Allan variance (exact expectation and covariance,
     iterated GLS); errors from the GLS information, goodness of fit from its chi^2."""
