@@ -14,6 +14,10 @@ from ._problems import SpectralArgs, rec_meta, spectral_model_psd
 
 
 def _np_periodogram(y, dt, n_blocks=1):
+    """``(f [Hz], P [m^2/Hz], M)``: the average periodogram of ``n_blocks`` blocks of M
+    frames, on the host. A numpy twin of :func:`._likelihood.block_periodogram` (tests hold
+    them equal), kept because the JAX one compiles anew for every record length and block
+    count (0.2-0.4 s jitted, ~1 s eager; benchmarks/bench_host_twins.py)."""
     y = np.asarray(y, dtype=float)
     m = y.size // n_blocks
     if m < 4:
@@ -27,6 +31,7 @@ def _np_periodogram(y, dt, n_blocks=1):
     p = (spec.real**2 + spec.imag**2).mean(axis=0) * dt / m
     f = np.arange(1, m // 2 + 1) / (m * dt)
     return f, p, m
+
 
 def spectral_gof(ratio, weight, n_params, min_dof=64):
     """Binned test of periodogram/model ratios (each has mean 1, variance 1/n_blocks).
@@ -55,6 +60,7 @@ def spectral_gof(ratio, weight, n_params, min_dof=64):
     dof = max(nb - n_params, 1)
     p = float(chi2_sf(stat, dof))
     return {"test": "binned spectral chi2", "statistic": stat, "dof": dof, "p_value": p}
+
 
 def _spectral_args(recs, layout, model, n_blocks, f_range, excluded=None):
     """Periodogram ordinates of all recordings. Whenever the model has the closed form, its

@@ -5,21 +5,19 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics import BOLTZMANN
+from .._config import x64_context
+from ..physics import BOLTZMANN, autocovariance_unchecked
 
 
-def _np_blur_factor(a: float) -> float:
-    if a < 1e-3:
-        return 1.0 - a / 3.0 + a * a / 12.0 - a**3 / 60.0
-    return 2.0 / a * (1.0 + math.expm1(-a) / a)
-
-
-def _np_rho_b(a: float, r: float) -> float:
-    phi1 = 1.0 - a / 2.0 + a * a / 6.0 if a < 1e-6 else -math.expm1(-a) / a
-    return phi1 * phi1 * math.exp(a - r)
+@jax.jit
+def _unit_lag_covariances(tau, w, dt):
+    """``(S(W/tau), rho B(W/tau))``: C(0) and C(1) of unit-variance frames without noise.
+    Jitted: one dispatch per start value (~10 us) instead of one per primitive (~1.4 ms)."""
+    return autocovariance_unchecked(jnp.arange(2.0), 1.0, tau, w, dt, 0.0)
 
 
 def moment_start(rec):
@@ -44,9 +42,10 @@ def moment_start(rec):
     else:
         rho_used = rho
     tau = -dt / math.log(rho_used)
-    a, r = w / tau, dt / tau
-    sigma2 = c1 / _np_rho_b(a, r) if c1 > 0 else c0
-    s = _np_blur_factor(a)
+    with x64_context(True):
+        s, rho_b = np.asarray(_unit_lag_covariances(
+            np.float64(tau), np.float64(w), np.float64(dt))).tolist()
+    sigma2 = c1 / rho_b if c1 > 0 else c0
     sigma2 = min(max(sigma2, 0.3 * c0 / s), 3.0 * c0 / s)
     eps2 = c0 - sigma2 * s
     eps2 = max(eps2, 0.02 * c0)
