@@ -86,6 +86,7 @@ def _interval_source(nll, args, scale, out, held, hessian="auto"):
 
 
 def _k_mode_of(layout):
+    """How the layout shares k across recordings (``result.extras['k_mode']``)."""
     if layout.linear_power:
         return "linear_power"
     return "shared" if layout.n_k == 1 else "per_group"

@@ -1,8 +1,11 @@
 """``blurtrap.calibrate``: every method of the paper plus exact and Whittle likelihoods.
 
-This module holds the public entry point and the dispatcher that chooses a method; the
-methods, checks and start values live in their own modules (``_ml_fits``,
-``_variance_methods``, ``_refusals``, ``_frames``, ``_options``, ``_starts``)."""
+This module holds the public entry point and the dispatcher that chooses a method. The rest
+lives by idea: ``_recordings`` (input, bead metadata), ``_options`` (argument checks),
+``_frames`` (what the frames show), ``_starts`` (start values), ``_spectral`` (periodogram
+ordinates, goodness of fit), ``_ml_fits`` (Whittle, blocked PSD, exact likelihood),
+``_variance_methods`` (variance vs exposure/power, Allan, equipartition), ``_refusals``
+(refusals and their messages) and ``_assemble`` (the result)."""
 
 from __future__ import annotations
 
@@ -132,6 +135,7 @@ def calibrate(
 
 
 def _default_k_mode(recs):
+    """One k per laser power when the recordings' powers differ, else one shared k."""
     powers = [r.laser_power for r in recs]
     if all(p is not None for p in powers) and len({float(p) for p in powers}) > 1:
         return "per_power"
@@ -140,6 +144,8 @@ def _default_k_mode(recs):
 
 def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,
                strict, fixed=None, excluded=None, robust=False):
+    """Choose the method (``'auto'``: see :func:`_auto_choice`), build the parameter layout
+    and run the fit on the (instrument-prepared) recordings."""
     notes: list[str] = []
     fixed = _check_spectral_options(method, robust, fixed, excluded)
     if method == "equipartition":

@@ -26,6 +26,9 @@ from ._starts import _start_vector
 
 def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None,
                   strict=True, fixed=None, excluded=None, robust=False):
+    """Whittle (``n_blocks=1``) or blocked-PSD Gamma-likelihood fit of all recordings, with
+    ``fixed`` parameters held and, with ``robust``, spikes left out; refused when the fit
+    fails or the relaxation time is not resolved by the record (or block)."""
     args = _spectral_args(recs, layout, model, n_blocks, f_range, excluded)
     scale = _start_vector(recs, layout, model.noise, start)
     out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
@@ -110,6 +113,8 @@ def _fit_held(fit, nll, scale, args, names, fixed):
 
 
 def _fit_exact(recs, layout, model, notes, fixed=None):
+    """Exact time-domain (ARMA) likelihood fit, started from the Whittle estimate (and also
+    from the closed forms where Whittle is unreliable, keeping the better optimum)."""
     args = make_exact_args(recs, layout, model)
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)

@@ -110,6 +110,7 @@ def _check_start(start):
 
 
 def _flag(name, value) -> bool:
+    """A True/False option as a bool; anything else is a ValueError naming it."""
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be True or False; got {name} = {value!r}")
     return bool(value)

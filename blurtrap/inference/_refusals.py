@@ -16,6 +16,8 @@ from ._variance import empirical_variance_se
 
 
 def _no_temporal_information_message(recs, info):
+    """Why these recordings cannot identify gamma, what they do determine (the frame
+    variance), and what to give or record instead."""
     best = max(z for _, z in info)
     v, se = empirical_variance_se(recs[0].positions)
     n = min(r.n_frames for r in recs)
@@ -168,6 +170,9 @@ def _singular_fisher_causes(recs, values, names) -> str:
 
 
 def _check_fit(out, names, method, strict=True, notes=None, recs=None):
+    """Refuse (``FitError``) a fit that did not converge or whose Fisher information is
+    singular, in effect too (see :func:`_unidentified`), with the causes the frames show;
+    with ``strict=False`` a singular information only adds a note."""
     hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
     if not bool(out.converged):
         seen = _outlier_sentence(recs) if recs else ""
@@ -208,6 +213,8 @@ MAX_RELATIVE_SE = 1.0
 
 
 def _unidentified(out, names) -> list[str]:
+    """The stiffness and friction parameters whose standard error exceeds
+    ``MAX_RELATIVE_SE`` times their value."""
     value = np.asarray(out.value, dtype=float)
     se = np.sqrt(np.abs(np.diag(np.asarray(out.cov, dtype=float))))
     core = [i for i, n in enumerate(names) if n in ("k", "c", "gamma") or n.startswith("k[")]

@@ -54,6 +54,8 @@ def moment_start(rec):
 
 
 def _start_vector(recs, layout, noise, start=None):
+    """Start values of the layout's parameters (medians of the recordings' moment starts and
+    the effect rules), with the user's ``start`` values where given."""
     if start:
         missing = [n for n in layout.names if n not in start]
         if not missing:

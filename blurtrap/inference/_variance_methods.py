@@ -47,6 +47,8 @@ def _joint_likelihood_se(recs, layout, model, p):
 
 
 def _fit_variance(recs, layout, model, method_name, notes):
+    """Variance vs exposure or vs laser power: weighted least squares of the frame
+    variances, with 95 % profile intervals and the joint likelihood's SE for comparison."""
     if len(recs) < len(layout.names):
         raise ValueError(
             f"{method_name} needs at least {len(layout.names)} recordings to fit "
@@ -134,6 +136,8 @@ def _fit_allan(recs, layout, model, notes):
 
 
 def _equipartition(recs, diffusion, pade):
+    """k per recording from its frame variance: naive ``kT/var``, or blur-corrected with a
+    given D (exact or Pade inversion of var = kT/k S(alpha))."""
     ks, kerr = [], []
     notes = []
     for r in recs:
