@@ -273,7 +273,7 @@ def main(argv=None):
     print(versions())
     print(f"load average at start: {loadavg()}; devices {jax.devices()}", flush=True)
 
-    from blurtrap.inference import _calibrate as cal
+    from blurtrap.inference import _frames, _spectral, _starts
     from blurtrap.inference._fit import fit_ml
     from blurtrap.inference._models import get_model
     from blurtrap.inference._problems import exact_nll, make_exact_args, make_layout, spectral_nll
@@ -282,17 +282,17 @@ def main(argv=None):
 
     def breakdown(r0, label):
         lay = make_layout([r0], "shared", True)
-        t_info = tmin(lambda: cal.temporal_information(r0), rep)
-        t_args = tmin(lambda: cal._spectral_args([r0], lay, mdl, 1, None), rep)
-        t_pg = tmin(lambda: cal._np_periodogram(r0.positions, DT, 1), rep)
-        t_start = tmin(lambda: cal._start_vector([r0], lay, True), rep)
-        sargs = cal._spectral_args([r0], lay, mdl, 1, None)
-        sc = cal._start_vector([r0], lay, True)
+        t_info = tmin(lambda: _frames.temporal_information(r0), rep)
+        t_args = tmin(lambda: _spectral._spectral_args([r0], lay, mdl, 1, None), rep)
+        t_pg = tmin(lambda: _spectral._np_periodogram(r0.positions, DT, 1), rep)
+        t_start = tmin(lambda: _starts._start_vector([r0], lay, True), rep)
+        sargs = _spectral._spectral_args([r0], lay, mdl, 1, None)
+        sc = _starts._start_vector([r0], lay, True)
         t_fit = tmin(lambda: jax.block_until_ready(fit_ml(spectral_nll, sc, sargs).value), rep)
         fo = fit_ml(spectral_nll, sc, sargs)
-        t_psd = tmin(lambda: np.asarray(cal._psd_jit(fo.value, sargs)), rep)
-        psd = cal._psd_jit(fo.value, sargs)
-        t_gof = tmin(lambda: cal.spectral_gof(sargs.power / psd, sargs.weight, 3), rep)
+        t_psd = tmin(lambda: np.asarray(_spectral._psd_jit(fo.value, sargs)), rep)
+        psd = _spectral._psd_jit(fo.value, sargs)
+        t_gof = tmin(lambda: _spectral.spectral_gof(sargs.power / psd, sargs.weight, 3), rep)
         print(f"  breakdown ({label}): temporal_information {ms(t_info)}; periodogram + args "
               f"{ms(t_args)} (numpy periodogram alone {ms(t_pg)}); start values {ms(t_start)}; "
               f"jitted fit {ms(t_fit)} ({int(fo.n_steps)} Newton steps after the coarse start); "
@@ -383,7 +383,7 @@ def main(argv=None):
           f"(diff {ll_np - ll_pkg:.2e}); dense MVN check on {ns} frames: "
           f"{ll_dense:.8f} vs python {ll_np_s:.8f}", flush=True)
 
-    starts = cal._start_vector([r0], lay, True)
+    starts = _starts._start_vector([r0], lay, True)
     sp_res = scipy_whittle_fit(y0, np.asarray(starts))
     t_sp = tmin(lambda: scipy_whittle_fit(y0, np.asarray(starts)), max(2, rep // 2), warm=0)
     r_pkg = bt.calibrate(r0)

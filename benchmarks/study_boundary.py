@@ -93,10 +93,10 @@ def unconstrained_whittle(rec, fit):
     """Whittle MLE with eps^2 free to go below 0: (k, gamma, eps2) or NaNs."""
     import jax.numpy as jnp
 
-    from blurtrap.inference._calibrate import _spectral_args
     from blurtrap.inference._fit import fit_ml
     from blurtrap.inference._models import get_model
     from blurtrap.inference._problems import make_layout
+    from blurtrap.inference._spectral import _spectral_args
 
     mdl = get_model("standard")
     layout = make_layout([rec], "shared", True)

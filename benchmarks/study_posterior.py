@@ -139,10 +139,10 @@ def _per_call_ms(fn, th, repeats=7, inner=50):
 
 def per_call_study(y) -> dict:
     from blurtrap.inference import _log_posterior as lp
-    from blurtrap.inference._calibrate import _spectral_args
     from blurtrap.inference._models import get_model
     from blurtrap.inference._posterior_priors import _resolve_priors
     from blurtrap.inference._problems import make_layout
+    from blurtrap.inference._spectral import _spectral_args
     from blurtrap.inference._whittle_closed import _rational_args
 
     r = rec(y)

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from ..inference._calibrate import screen_model
 from ..inference._fit import chi2_sf
+from ..inference._ml_fits import screen_model
 from ..inference._result import FitError
 from ._evidence import _evidence, _gof_change, _kurtosis_test, _line_candidate, _plausible
 from ._results import Candidate

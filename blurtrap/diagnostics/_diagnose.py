@@ -34,9 +34,11 @@ import dataclasses
 import numpy as np
 
 from .._config import float64_scope
-from ..inference._calibrate import _inspect_frames, as_recordings, calibrate
+from ..inference._calibrate import calibrate
+from ..inference._frames import _inspect_frames
 from ..inference._instrument import default_model
 from ..inference._models import get_model
+from ..inference._recordings import as_recordings
 from ..inference._result import FitError
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
 from ._detector import detector_note

@@ -3,8 +3,8 @@ repeat) and the comparison of two fits of the same data (:func:`compare`)."""
 
 from __future__ import annotations
 
-from ..inference._calibrate import as_recordings
 from ..inference._models import get_model
+from ..inference._recordings import as_recordings
 from ..inference._result import CalibrationResult
 from ._candidates import _check_alpha, _check_candidates
 from ._diagnose import diagnose

@@ -8,7 +8,6 @@ from ._allan import allan_variance as allan_variance
 from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
 from ._calibrate import calibrate as calibrate
-from ._calibrate import moment_start as moment_start
 from ._fit import FitOutput as FitOutput
 from ._fit import fit_ml as fit_ml
 from ._likelihood import (
@@ -60,6 +59,7 @@ from ._priors import (
 )
 from ._result import CalibrationResult as CalibrationResult
 from ._result import FitError as FitError
+from ._starts import moment_start as moment_start
 from ._stored import fit_psd as fit_psd
 from ._variance import (
     drift_extrapolation as drift_extrapolation,

@@ -3,7 +3,7 @@ of :func:`calibrate`, applied to every row of a batch without aborting the other
 
 Host side (numpy): data checks and the lag-1 temporal information of each row, taken in the
 same pass over the frames as the periodograms. Device side (in the vmapped fit): the binned
-spectral goodness-of-fit statistic of :func:`blurtrap.inference._calibrate.spectral_gof`.
+spectral goodness-of-fit statistic of :func:`blurtrap.inference._spectral.spectral_gof`.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ._calibrate import temporal_information
 from ._fit import chi2_sf
+from ._frames import temporal_information
 
 # The unit-slip thresholds of ``Recording`` (blurtrap/data/_recording.py; a test holds them
 # equal): a batch row is checked like a Recording built from it.

@@ -187,7 +187,7 @@ def _clean_lines(recs, sts, lines, notes, excluded):
         if lines == "keep":
             out.append(r)
             continue
-        from ._calibrate import _outliers
+        from ._frames import _outliers
 
         if _outliers(r)[0]:
             # isolated spikes (even periodic ones) are not sinusoids: subtracting "lines"

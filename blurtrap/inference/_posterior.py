@@ -40,14 +40,16 @@ from typing import Any
 import numpy as np
 
 from .._config import float64_scope
-from ._calibrate import _default_k_mode, _spectral_args, as_recordings, calibrate
+from ._calibrate import _default_k_mode, calibrate
 from ._log_posterior import _compiled_log_posterior, _PostArgs
 from ._models import get_model
 from ._posterior_priors import _check_user_priors, _resolve_priors
 from ._posterior_result import Posterior, _derived
 from ._priors import LogUniform, Uniform
 from ._problems import make_exact_args, make_layout
+from ._recordings import as_recordings
 from ._result import CalibrationResult
+from ._spectral import _spectral_args
 from ._whittle_closed import (
     LEAKAGE_MAX,
     _leakage,

@@ -118,7 +118,9 @@ def fit_psd(frequencies, power, *, frame_interval, exposure, n_blocks=1,
         weight=jnp.asarray(weight[None]), log_ref=jnp.asarray(math.log(float(np.mean(p)))),
         block_len=jnp.asarray([float(block_frames or 0)]) if use_block else None)
     vec = _start(f, p, dt, float(temperature), mdl.noise)
-    from ._calibrate import _assemble, _check_fit, spectral_gof
+    from ._assemble import _assemble
+    from ._refusals import _check_fit
+    from ._spectral import spectral_gof
 
     for name in layout.extra_names:
         if name not in _EXTRA_START:

@@ -183,7 +183,7 @@ def blocked_psd(recording, n_blocks=None):
     """Blocked periodogram exactly as ``calibrate(method="psd")`` computes it.
 
     Returns ``(f [Hz], two-sided P [m^2/Hz], n_blocks)``."""
-    from ..inference._calibrate import _np_periodogram
+    from ..inference._spectral import _np_periodogram
 
     n = recording.n_frames
     nb = n_blocks if n_blocks is not None else max(1, min(128, n // 64))

@@ -16,7 +16,7 @@ import pytest
 import blurtrap as bt
 from blurtrap.data import _recording
 from blurtrap.inference import FitError, _batch_checks
-from blurtrap.inference._calibrate import temporal_information
+from blurtrap.inference._frames import temporal_information
 
 DT = 1 / 1500
 W0 = DT * 1e-9  # (almost) instantaneous sampling: the AR(1) frames below

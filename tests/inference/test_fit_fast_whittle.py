@@ -16,7 +16,7 @@ import pytest
 from scipy import special
 
 import blurtrap as bt
-from blurtrap.inference import _batch, _calibrate, _fit
+from blurtrap.inference import _batch, _fit, _spectral, _starts
 from blurtrap.inference._models import get_model
 from blurtrap.inference._problems import (
     _binned_args,
@@ -145,8 +145,8 @@ def problem(request):
     recs = _recordings(7, specs)
     mdl = get_model(model)
     layout = make_layout(recs, k_mode, mdl.noise)
-    args = _calibrate._spectral_args(recs, layout, mdl, n_blocks, f_range)
-    scale = _calibrate._start_vector(recs, layout, mdl.noise)
+    args = _spectral._spectral_args(recs, layout, mdl, n_blocks, f_range)
+    scale = _starts._start_vector(recs, layout, mdl.noise)
     return args, scale
 
 
@@ -215,7 +215,7 @@ def test_plan_only_for_the_closed_form_expected_periodogram():
             ("naive", 1, False, None)):  # no expected periodogram
         mdl = get_model(model)
         layout = make_layout(recs, "shared", mdl.noise, tuple(p.name for p in mdl.extra_params))
-        args = _calibrate._spectral_args(recs, layout, mdl, n_blocks, None)
+        args = _spectral._spectral_args(recs, layout, mdl, n_blocks, None)
         plan = spectral_newton_plan(args)
         assert (plan is not None) == want_plan, model
         if plan is not None:

@@ -189,9 +189,9 @@ def test_short_chain_warns(short_rec):
 
 
 def test_nan_maps_to_minus_inf(short_rec):
-    from blurtrap.inference._calibrate import _spectral_args
     from blurtrap.inference._models import get_model
     from blurtrap.inference._problems import make_layout
+    from blurtrap.inference._spectral import _spectral_args
 
     lay = make_layout([short_rec], "shared", True)
     spec = _spectral_args([short_rec], lay, get_model(None), 1, None)
@@ -257,7 +257,6 @@ def test_joint_linear_power():
 
 def test_log_posterior_is_likelihood_plus_prior_plus_jacobian(short_rec):
     """Every likelihood form: log post(theta) = -nll(p) + log prior(p) + sum(theta)."""
-    from blurtrap.inference._calibrate import _spectral_args
     from blurtrap.inference._models import get_model
     from blurtrap.inference._problems import (
         exact_nll,
@@ -265,6 +264,7 @@ def test_log_posterior_is_likelihood_plus_prior_plus_jacobian(short_rec):
         make_layout,
         spectral_nll,
     )
+    from blurtrap.inference._spectral import _spectral_args
 
     rec = _rec(np.asarray(short_rec.positions)[:2048])
     lay = make_layout([rec], "shared", True)

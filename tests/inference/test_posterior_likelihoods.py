@@ -22,10 +22,10 @@ import blurtrap
 from blurtrap.inference import _posterior as pm
 from blurtrap.inference import _posterior_result as res_mod
 from blurtrap.inference import _whittle_closed as wc_mod
-from blurtrap.inference._calibrate import _spectral_args
 from blurtrap.inference._models import get_model
 from blurtrap.inference._posterior import ShortChainWarning, sample_posterior
 from blurtrap.inference._problems import make_layout
+from blurtrap.inference._spectral import _spectral_args
 
 DT = 1.0 / 1500.0
 GAMMA = 6 * math.pi * 0.00093 * 1.53e-6  # [N s/m]

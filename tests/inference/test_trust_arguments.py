@@ -18,8 +18,10 @@ from blurtrap.diagnostics import _candidates as cand_mod
 from blurtrap.diagnostics import _diagnose as diag_mod
 from blurtrap.inference import FitError
 from blurtrap.inference import _calibrate as cal_mod
+from blurtrap.inference import _options as opt_mod
 from blurtrap.inference import _posterior as post_mod
 from blurtrap.inference import _posterior_priors as prior_mod
+from blurtrap.inference import _refusals as ref_mod
 
 KT = 1.380649e-23 * 295.0
 GAMMA = 6 * math.pi * 9.3e-4 * 1.53e-6
@@ -97,7 +99,7 @@ def test_f_max_above_nyquist_is_refused(rec, monkeypatch, kw, f_range):
 
 
 def test_f_max_at_nyquist_is_accepted(rec):
-    assert cal_mod._check_options([rec], "psd", "auto", None, None, (10.0, 750.0), None,
+    assert opt_mod._check_options([rec], "psd", "auto", None, None, (10.0, 750.0), None,
                                   False, None, True)[1] == (10.0, 750.0)
 
 
@@ -209,13 +211,13 @@ def test_dt_much_larger_than_tau_is_still_named_when_true():
 
 def test_clean_informative_trace_gets_a_neutral_list():
     x, _ = _trace(seed=5)
-    why = cal_mod._singular_fisher_causes([_rec(x)], np.array([5e-5, GAMMA, 1e-18]),
+    why = ref_mod._singular_fisher_causes([_rec(x)], np.array([5e-5, GAMMA, 1e-18]),
                                           ("k", "gamma", "tracking_var"))
     assert "dt >> tau" not in why and "outliers:" not in why
     assert "possible causes" in why and "outliers or steps" in why
     # a step of the trap centre is named
     y = x.copy()
     y[N // 2:] += 20 * float(np.std(x))
-    why = cal_mod._singular_fisher_causes([_rec(y)], np.array([5e-5, GAMMA, 1e-18]),
+    why = ref_mod._singular_fisher_causes([_rec(y)], np.array([5e-5, GAMMA, 1e-18]),
                                           ("k", "gamma", "tracking_var"))
     assert "a step or drift" in why and "dt >> tau" not in why

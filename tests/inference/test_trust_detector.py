@@ -89,7 +89,7 @@ def test_unclipped_traces_are_not_called_saturated(step, seed):
     x = _trace(n=[256, 1024, 4096, 16384, 600, 2000][seed], seed=100 + seed)
     if step:
         x = np.round(x / (step * SIG)) * step * SIG
-    from blurtrap.inference._calibrate import _inspect_frames
+    from blurtrap.inference._frames import _inspect_frames
 
     notes = _inspect_frames([_rec(x)], strict=True)
     assert not any("saturated" in n for n in notes), notes

@@ -7,7 +7,7 @@ import pytest
 
 import blurtrap as bt
 from blurtrap._demo_experiment import DemoConfig, simulate_experiment
-from blurtrap.inference import _calibrate, _variance
+from blurtrap.inference import _starts, _variance
 from blurtrap.inference._problems import make_layout, rec_meta
 
 
@@ -56,7 +56,7 @@ def _args(recs, k_mode):
     args = _variance.VarianceArgs(layout=layout, model=model, meta=rec_meta(recs),
                                   v=jnp.asarray(v), n=jnp.asarray(n),
                                   se=jnp.asarray(v * np.sqrt(2.0 / n)))
-    return args, _calibrate._start_vector(recs, layout, True)
+    return args, _starts._start_vector(recs, layout, True)
 
 
 def test_result_does_not_depend_on_the_start(demo_sets):

@@ -1,0 +1,99 @@
+"""From a fit's values and covariance to a :class:`CalibrationResult`, and where its profile
+intervals come from."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._config import float64_scope
+from ._profile import ProfileIntervals
+from ._result import CalibrationResult
+
+
+def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None,
+              at_bound=None, interval_source=None):
+    """The result of a fit. ``at_bound``: the fit's bound flags (``FitOutput.at_bound``, the
+    one rule :func:`blurtrap.inference._fit.at_lower_bound`); those parameters get a NaN error
+    (the fit already made their variance NaN and the others' conditional on the bound).
+    ``interval_source``: where the result's profile intervals come from
+    (:class:`blurtrap.inference._profile.ProfileIntervals`; default: Wald intervals only)."""
+    values = np.asarray(values, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    names = layout.names
+    nk = 1 if layout.linear_power else layout.n_k
+    if layout.linear_power:
+        powers = np.asarray(layout.power)
+        k_rec = values[0] * powers
+        k_err = np.sqrt(cov[0, 0]) * powers
+    else:
+        idx = np.asarray(layout.k_index)
+        k_rec = values[:nk][idx]
+        k_err = np.sqrt(np.clip(np.diag(cov)[:nk], 0, None))[idx]
+    if "power_offset" in names:
+        p0 = values[names.index("power_offset")]
+        k_rec = k_rec * (1.0 - p0 / np.asarray(layout.power))
+    bound = np.zeros(len(names), bool) if at_bound is None else np.asarray(at_bound, bool)
+    at_bounds = [n for n, b in zip(names, bound) if b]
+    if bound.any():  # NaN error, whatever the caller's covariance says
+        cov = cov.copy()
+        cov[bound, :] = 0.0
+        cov[:, bound] = 0.0
+        cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
+        notes = tuple(notes) + (
+            f"{', '.join(at_bounds)} at the lower bound 0: NaN error there, and the other "
+            "errors are conditional on the bound (smaller than the spread of the estimates "
+            "when the bound is only nearly reached); result.intervals gives profile-likelihood "
+            "intervals that account for it",)
+    temps = {float(r.temperature) for r in recs}
+    if "drift_diffusion" in names:
+        notes = tuple(notes) + (
+            "drift_diffusion: its standard error is ~3x too small (half the drift power is the "
+            "record's one end-to-end ramp, so the periodogram ordinates are not independent; "
+            "the docstring of blurtrap.inference.EFFECTS['drift']); treat it as an order of "
+            "magnitude. The errors of k, gamma and eps^2 stay calibrated.",)
+    return CalibrationResult(
+        method=method,
+        model=model.name,
+        param_names=tuple(names),
+        values=values,
+        covariance=cov,
+        temperature=float(recs[0].temperature) if len(temps) == 1 else float(np.mean(list(temps))),
+        k_per_recording=np.asarray(k_rec, dtype=float),
+        k_per_recording_err=np.asarray(k_err, dtype=float),
+        gof=gof,
+        n_recordings=len(recs),
+        n_frames=int(sum(r.n_frames for r in recs)),
+        converged=True,
+        at_bounds=tuple(at_bounds),
+        notes=tuple(notes),
+        extras=extras or {},
+        interval_source=interval_source,
+    )
+
+
+def _interval_source(nll, args, scale, out, held, hessian="auto"):
+    """Profile intervals of the fit (of its free parameters when some are held; none when
+    a held input has an error: its Wald errors include the propagated input error, which a
+    profile with the input held would leave out)."""
+    if held is None:
+        return ProfileIntervals(nll, args, scale, out.value, out.cov, out.at_bound, hessian)
+    red, fscale, fargs, rout, free, has_error = held
+    if has_error:
+        return None
+    src = ProfileIntervals(red, fargs, fscale, rout.value, rout.cov, rout.at_bound, hessian)
+    return lambda result: float64_scope(src._compute)(
+        tuple(result.param_names[i] for i in free))
+
+
+def _k_mode_of(layout):
+    """How the layout shares k across recordings (``result.extras['k_mode']``)."""
+    if layout.linear_power:
+        return "linear_power"
+    return "shared" if layout.n_k == 1 else "per_group"
+
+
+def _given_intervals(intervals):
+    """An ``interval_source`` for intervals already computed (all profile intervals)."""
+    table = {n: (float(lo), float(hi)) for n, (lo, hi) in intervals.items()}
+    return lambda result: (table, {n: "profile" for n in table})
+

@@ -1,0 +1,167 @@
+"""The maximum-likelihood methods of ``calibrate``: Whittle / blocked-PSD fits (with held
+parameters and the robust refit), the exact time-domain likelihood, and the Whittle
+leakage index that chooses between them."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._config import float64_scope
+from ._assemble import _assemble, _interval_source, _k_mode_of
+from ._fit import fit_ml, fit_ml_fd_newton, fit_nll_only
+from ._fixed import expand as expand_fixed
+from ._fixed import propagate as propagate_fixed
+from ._fixed import reduce as reduce_fixed
+from ._fixed import reduced_objective
+from ._models import get_model
+from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
+from ._refusals import _check_fit, _check_relaxation_resolved
+from ._spectral import _psd_jit, _spectral_args, spectral_gof
+from ._starts import _start_vector
+
+
+def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, start=None,
+                  strict=True, fixed=None, excluded=None, robust=False):
+    """Whittle (``n_blocks=1``) or blocked-PSD Gamma-likelihood fit of all recordings, with
+    ``fixed`` parameters held and, with ``robust``, spikes left out; refused when the fit
+    fails or the relaxation time is not resolved by the record (or block)."""
+    args = _spectral_args(recs, layout, model, n_blocks, f_range, excluded)
+    scale = _start_vector(recs, layout, model.noise, start)
+    out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
+    _check_fit(out, layout.names, method_name, strict, notes, recs)
+    if robust:
+        out, held, args = _robust_refit(out, held, args, scale, layout, fixed, notes,
+                                        method_name, strict, recs)
+    psd = _psd_jit(out.value, args)
+    gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
+    extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
+              "f": np.asarray(args.f), "ratio": np.asarray(args.power / psd),
+              "weight": np.asarray(args.weight)}
+    res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras,
+                    at_bound=out.at_bound,
+                    interval_source=_interval_source(spectral_nll, args, scale, out, held))
+    block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
+    return _check_relaxation_resolved(res, recs, method_name, block)
+
+
+#: robust spectral fit: an ordinate whose Gamma upper tail probability under the fit is below
+#: this (Bonferroni over the ordinates) is a spike and gets no weight
+ROBUST_ALPHA = 1e-3
+
+
+def _robust_refit(out, held, args, scale, layout, fixed, notes, method, strict, recs):
+    """Drop ordinates far above the fitted spectrum (spikes, lines) and refit, up to 3
+    times; the count and the frequencies go into the notes."""
+    from jax.scipy.special import gammaincc
+
+    dropped = np.zeros(np.shape(args.weight), bool)
+    for _ in range(3):
+        w = np.asarray(args.weight)
+        ratio = np.asarray(args.power / _psd_jit(out.value, args))
+        n_eff = np.where(w > 0, w, 1.0)
+        tail = np.asarray(gammaincc(n_eff, n_eff * ratio))
+        spikes = (w > 0) & (tail < ROBUST_ALPHA / max(int(np.sum(w > 0)), 1))
+        if not spikes.any():
+            break
+        dropped |= spikes
+        args = eqx.tree_at(lambda a: a.weight, args, jnp.asarray(np.where(spikes, 0.0, w)))
+        out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
+        _check_fit(out, layout.names, method, strict, notes, recs)
+    if dropped.any():
+        fr = np.asarray(args.f)[dropped]
+        shown = ", ".join(f"{v:.5g}" for v in fr[:8]) + (" ..." if fr.size > 8 else "")
+        notes.append(f"robust: {int(dropped.sum())} ordinate(s) far above the fitted spectrum "
+                     f"(Gamma tail p < {ROBUST_ALPHA:g}/M) left out: {shown} Hz")
+    else:
+        notes.append("robust: no ordinate far above the fitted spectrum")
+    return out, held, args
+
+
+@float64_scope
+def screen_model(recs, model, k, start=None):
+    """Whittle fit of ``model`` without standard errors: ``(params dict, nll, gof, ok)``.
+    Same ordinates and objective as ``calibrate(method='likelihood', likelihood='whittle')``
+    so that log-likelihoods of nested models are comparable."""
+    mdl = get_model(model)
+    layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
+    args = _spectral_args(recs, layout, mdl, 1, None)
+    scale = _start_vector(recs, layout, mdl.noise, start)
+    p, nll, ok = fit_nll_only(spectral_nll, scale, args)
+    psd = _psd_jit(jnp.asarray(p), args)
+    gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
+    return dict(zip(layout.names, map(float, p))), nll, gof, ok
+
+
+def _fit_held(fit, nll, scale, args, names, fixed):
+    """``fit(nll, scale, args)`` with the parameters in ``fixed`` ({name: (value, se)}) held:
+    ``(FitOutput on all parameters, held)``, the input errors propagated into the covariance
+    (:mod:`._fixed`); ``held`` is None without fixed parameters, else what the intervals need
+    (reduced objective, its start scale, args and output)."""
+    if not fixed:
+        return fit(nll, scale, args), None
+    free, fscale, fargs = reduce_fixed(names, scale, args, fixed)
+    red = reduced_objective(nll)
+    out = fit(red, fscale, fargs)
+    full = expand_fixed(out, free, len(names), fargs.full)
+    cov = propagate_fixed(nll, args, full.value, full.cov, names, fixed)
+    full = eqx.tree_at(lambda o: o.cov, full, jnp.asarray(cov))
+    return full, (red, fscale, fargs, out, free, any(se > 0 for _, se in fixed.values()))
+
+
+def _fit_exact(recs, layout, model, notes, fixed=None):
+    """Exact time-domain (ARMA) likelihood fit, started from the Whittle estimate (and also
+    from the closed forms where Whittle is unreliable, keeping the better optimum)."""
+    args = make_exact_args(recs, layout, model)
+    # start from the (cheap, asymptotically equivalent) Whittle estimate
+    sargs = _spectral_args(recs, layout, model, 1, None)
+    moment = _start_vector(recs, layout, model.noise)
+    wout, _ = _fit_held(fit_ml, spectral_nll, moment, sargs, layout.names, fixed)
+    starts = [wout.value] if bool(wout.success) else []
+    names = layout.names
+    if not starts or ("k" in names and _leakage_index(
+            recs, float(wout.value[0]), float(wout.value[names.index("gamma")]))
+            > _LEAKAGE_INDEX_MAX):
+        # where Whittle is unreliable (tau not << T) also start from the closed forms and
+        # keep the better optimum: the exact likelihood can have a second local optimum there
+        starts.append(moment)
+    out = s_out = held = None
+    for s0 in starts:
+        cand, h0 = _fit_held(fit_ml_fd_newton, exact_nll, s0, args, names, fixed)
+        if out is None or (bool(cand.converged) and (not bool(out.converged)
+                                                      or float(cand.nll) < float(out.nll))):
+            out, s_out, held = cand, s0, h0
+    assert out is not None  # starts is never empty
+    _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
+    # goodness of fit on the periodogram against this fit's own spectrum
+    psd = _psd_jit(out.value, sargs)
+    gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
+    extras = {"loglik": -float(out.nll)}
+    res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
+                    at_bound=out.at_bound,
+                    interval_source=_interval_source(exact_nll, args, s_out, out, held,
+                                                     hessian="fd"))
+    return _check_relaxation_resolved(res, recs, "likelihood (exact)")
+
+
+#: Switch from Whittle to the exact likelihood above this leakage index (see below).
+_LEAKAGE_INDEX_MAX = 1.0
+
+
+def _leakage_index(recs, k_values, gamma):
+    """``max_r sqrt(N_r) tau_r / T_r``: the Whittle likelihood's finite-record bias in units of
+    the standard error scales like this. Measured (benchmarks/study_whittle_leakage.py, results
+    in benchmarks/RESULTS_calibration.md; 8 seeds x 65 536 frames, W = dt, same data for both
+    likelihoods): the mean Whittle-minus-exact shift of gamma is +0.35, +0.61, +0.14, +0.01 SE
+    at index 8.5, 2.6, 0.85, 0.26 (with P_d instead of the exact expected periodogram it was
+    -2.0, -0.7, -0.2, -0.08 SE). Above 1.0 auto uses the exact likelihood (below it the
+    shift is < ~0.15 SE and Whittle is up to ~250x cheaper on long photodiode records)."""
+    idx = 0.0
+    for r, kk in zip(recs, np.broadcast_to(np.asarray(k_values, dtype=float), (len(recs),))):
+        tau = gamma / kk
+        idx = max(idx, math.sqrt(r.n_frames) * tau / (r.n_frames * float(r.frame_interval)))
+    return idx
+

@@ -1,0 +1,116 @@
+"""Validation of ``calibrate``'s options: nothing given is ignored silently, and a bad value
+is named with what was expected."""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+_K_MODES = (None, "shared", "per_recording", "per_power", "linear_power")
+#: D of a 1 nm sphere in water is ~2e-10 m^2/s: anything above this is a unit slip.
+_MAX_PLAUSIBLE_DIFFUSION = 1e-8
+
+
+def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pade, start,
+                   strict):
+    """Validate calibrate's options; nothing given is ignored silently."""
+    if k not in _K_MODES:
+        raise ValueError(f"k must be one of {_K_MODES[1:]} (or None for the default); "
+                         f"got k = {k!r}")
+    if not isinstance(strict, (bool, np.bool_)):
+        raise ValueError(f"strict must be True or False; got strict = {strict!r}")
+    if not isinstance(pade, (bool, np.bool_)):
+        raise ValueError(f"pade must be True or False; got pade = {pade!r}")
+    n_blocks = _check_n_blocks(method, n_blocks)
+    if f_range is not None:
+        f_range = _check_f_range(recs, method, likelihood, f_range)
+    _check_diffusion(method, diffusion, pade)
+    if start is not None:
+        _check_start(start)
+    return n_blocks, f_range
+
+
+def _check_n_blocks(method, n_blocks):
+    """``n_blocks`` as an int (None when not given); only with method='psd'."""
+    if n_blocks is not None:
+        if method != "psd":
+            raise ValueError(f"n_blocks = {n_blocks!r} applies only to method='psd'; got "
+                             f"method = {method!r}")
+        if isinstance(n_blocks, bool) or not isinstance(n_blocks, numbers.Integral) \
+                or n_blocks < 1:
+            raise ValueError(f"n_blocks must be an integer >= 1 (number of non-overlapping "
+                             f"blocks); got n_blocks = {n_blocks!r}")
+        n_blocks = int(n_blocks)
+    return n_blocks
+
+
+def _check_f_range(recs, method, likelihood, f_range):
+    """``f_range`` as ``(f_min, f_max)`` floats [Hz] within (0, fs/2]; spectral fits only."""
+    if method in ("equipartition", "variance_vs_exposure", "variance_vs_power") or \
+            (method in ("auto", "likelihood") and likelihood == "exact"):
+        raise ValueError(f"f_range = {f_range!r} applies only to the spectral methods "
+                         "(method='psd', or the Whittle likelihood); got method = "
+                         f"{method!r}, likelihood = {likelihood!r}")
+    try:
+        lo, hi = (float(v) for v in f_range)
+    except (TypeError, ValueError):
+        raise ValueError(f"f_range must be two numbers (f_min, f_max) in Hz; got "
+                         f"f_range = {f_range!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+        raise ValueError(f"f_range must satisfy 0 <= f_min < f_max (finite, Hz); got "
+                         f"f_range = ({lo!r}, {hi!r})")
+    nyq = max(0.5 / float(r.frame_interval) for r in recs)
+    if lo >= nyq:
+        raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz starts above the Nyquist "
+                         f"frequency {nyq:g} Hz of the recordings (f_range is in Hz, not kHz)")
+    if hi > nyq * (1.0 + 1e-9):
+        raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz: f_max = {hi:g} Hz is above the "
+                         f"Nyquist frequency fs/2 = {nyq:g} Hz of the recordings, where "
+                         "there are no ordinates; expected f_max <= fs/2 (f_range is in "
+                         "Hz, not kHz)")
+    return (lo, hi)
+
+
+def _check_diffusion(method, diffusion, pade):
+    """A given D [m^2/s] is finite, > 0 and plausible, and only for equipartition/auto;
+    ``pade=True`` needs it."""
+    if diffusion is not None:
+        if method not in ("equipartition", "auto"):
+            raise ValueError(f"diffusion = {diffusion!r} is used only by method='equipartition' "
+                             f"(and by 'auto' when frames carry no temporal information); got "
+                             f"method = {method!r}")
+        d = float(diffusion) if isinstance(diffusion, numbers.Real) and not isinstance(
+            diffusion, bool) else math.nan
+        if not (math.isfinite(d) and d > 0):
+            raise ValueError(f"diffusion (diffusion coefficient D) must be finite and > 0 "
+                             f"m^2/s; got diffusion = {diffusion!r}")
+        if d > _MAX_PLAUSIBLE_DIFFUSION:
+            raise ValueError(
+                f"diffusion = {d:g} m^2/s is implausibly large (a 1 nm sphere in water has "
+                f"D ~ 2e-10 m^2/s): it looks like um^2/s. D is in SI units: 1 um^2/s = 1e-12 m^2/s"
+            )
+    elif pade:
+        raise ValueError("pade=True selects the Pade inversion of blur-corrected equipartition "
+                         "and needs diffusion=D; got diffusion=None")
+
+
+def _check_start(start):
+    """Start values: a dict of finite numbers > 0 (SI) by parameter name."""
+    if not isinstance(start, dict):
+        raise ValueError(f"start must be a dict of start values by parameter name; got "
+                         f"{type(start).__name__}")
+    for name, v in start.items():
+        ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) \
+            and v > 0  # pyright: ignore[reportOperatorIssue]  # numbers.Real orders
+        if not ok:
+            raise ValueError(f"start[{name!r}] must be a finite number > 0 (SI units); got "
+                             f"{v!r}")
+
+
+def _flag(name, value) -> bool:
+    """A True/False option as a bool; anything else is a ValueError naming it."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False; got {name} = {value!r}")
+    return bool(value)

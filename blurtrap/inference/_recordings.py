@@ -1,0 +1,112 @@
+"""The recordings handed to ``calibrate``: accepting them, and what their metadata say about
+the bead (a known radius gives the Stokes friction, against which the fit is checked)."""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+from typing import Any
+
+from .._config import warn_if_float32
+
+
+def as_recordings(data: Any) -> list:
+    """Accept a Recording, a RecordingSet, a sequence of Recordings or a path."""
+    if isinstance(data, (str, os.PathLike)):
+        from ..data import load
+
+        data = load(data)
+    if hasattr(data, "positions") and hasattr(data, "frame_interval"):
+        recs = [data]
+    elif hasattr(data, "shape") and hasattr(data, "dtype"):
+        raise TypeError(
+            f"data is a bare array of shape {tuple(data.shape)}: its frame interval and exposure "
+            "are unknown. Wrap arrays with blurtrap.from_arrays(positions, frame_interval=..., "
+            "exposure=...)."
+        )
+    elif isinstance(data, dict):
+        raise TypeError(
+            "data is a dict; expected a Recording, a RecordingSet, a list of Recordings or a "
+            "manifest path (load a manifest dict with blurtrap.load or build Recordings with "
+            "blurtrap.from_arrays)"
+        )
+    else:
+        try:
+            recs = list(data)
+        except TypeError:
+            raise TypeError(
+                "data must be a Recording, a RecordingSet, a list of Recordings or a manifest "
+                f"path; got {type(data).__name__}. Wrap arrays with blurtrap.from_arrays(...)."
+            ) from None
+    if not recs:
+        raise ValueError("data holds no recordings")
+    for i, r in enumerate(recs):
+        if not (hasattr(r, "positions") and hasattr(r, "frame_interval")):
+            hint = (" (a bare array: its frame interval and exposure are unknown; wrap arrays "
+                    "with blurtrap.from_arrays(positions, frame_interval=..., exposure=...))"
+                    if hasattr(r, "shape") else "")
+            raise TypeError(f"data[{i}] is a {type(r).__name__}; expected a Recording{hint}")
+        warn_if_float32("positions", r.positions)
+    return recs
+
+
+#: a fitted gamma outside [1/3, 3] x the Stokes friction of the known bead is flagged
+_STOKES_MAX_RATIO = 3.0
+
+
+def _bead_radii(recs) -> list:
+    """``metadata['bead_radius_m']`` (and optional ``'viscosity_Pa_s'``) per recording, as
+    ``(radius, viscosity or None)`` or ``None``; a value that is not a plausible radius in
+    metres is a ValueError."""
+    out = []
+    for i, r in enumerate(recs):
+        meta = getattr(r, "metadata", None) or {}
+        rad = meta.get("bead_radius_m")
+        if rad is None:
+            out.append(None)
+            continue
+        ok = isinstance(rad, numbers.Real) and not isinstance(rad, bool) and \
+            math.isfinite(float(rad)) and float(rad) > 0
+        if not ok:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] must be a bead radius "
+                             f"in m (> 0, finite); got {rad!r}")
+        if float(rad) > 1e-3:
+            raise ValueError(f"recording {i}: metadata['bead_radius_m'] = {rad!r} m is "
+                             f"implausibly large: it looks like um or nm (1 um = 1e-6 m)")
+        eta = meta.get("viscosity_Pa_s")
+        if eta is not None and not (isinstance(eta, numbers.Real) and not isinstance(eta, bool)
+                                    and math.isfinite(float(eta)) and float(eta) > 0):
+            raise ValueError(f"recording {i}: metadata['viscosity_Pa_s'] must be > 0 (Pa s); "
+                             f"got {eta!r}")
+        out.append((float(rad), None if eta is None else float(eta)))
+    return out
+
+
+def _stokes_notes(recs, radii, res) -> list:
+    """A note when the fitted gamma is far from Stokes' 6 pi eta r of the known bead."""
+    from ..physics._effects import water_viscosity
+
+    g = float(res.gamma)
+    if not (math.isfinite(g) and g > 0) or res.method == "equipartition":
+        return []
+    for i, (r, ri) in enumerate(zip(recs, radii)):
+        if ri is None:
+            continue
+        rad, eta = ri
+        t = float(r.temperature)
+        which = "metadata viscosity_Pa_s" if eta is not None else f"water at {t:g} K"
+        eta = eta if eta is not None else float(water_viscosity(t))
+        g0 = 6.0 * math.pi * eta * rad
+        ratio = g / g0
+        if 1.0 / _STOKES_MAX_RATIO <= ratio <= _STOKES_MAX_RATIO:
+            return []
+        return [f"gamma = {g:.4g} N s/m is {ratio:.3g} x the Stokes friction 6 pi eta r = "
+                f"{g0:.4g} N s/m of the bead (r = {rad:.4g} m from recording {i}'s metadata "
+                f"bead_radius_m, eta = {eta:.4g} Pa s, {which}); expected within "
+                f"{1 / _STOKES_MAX_RATIO:.2g}-{_STOKES_MAX_RATIO:g} x (a nearby surface raises "
+                "it by Faxen's factor, < 3 x above ~1.1 radii). Check the position "
+                "calibration (units), the exposure and frame interval, the bead radius and "
+                "the temperature"]
+    return []
+

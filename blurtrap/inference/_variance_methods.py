@@ -1,0 +1,188 @@
+"""The variance methods of ``calibrate``: variance vs exposure or laser power (least squares
+with profile intervals), the overlapping Allan variance, and (blur-corrected)
+equipartition."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..physics import BOLTZMANN
+from ._allan import fit_allan
+from ._assemble import _assemble, _given_intervals
+from ._fit import chi2_sf
+from ._problems import rec_meta
+from ._result import LAB as _LAB_UNITS
+from ._result import CalibrationResult, FitError
+from ._spectral import _psd_jit, _spectral_args
+from ._starts import _start_vector
+from ._variance import VarianceArgs, empirical_variance_se, fit_variances, profile_intervals
+
+
+def _joint_likelihood_se(recs, layout, model, p):
+    """Standard errors the joint (Whittle) likelihood of the same recordings would give at
+    ``p``: the expected Fisher information of the periodogram ordinates,
+    ``sum_f w(f) grad log P(f) grad log P(f)^T``, with the package's spectral model
+    (central differences of the compiled model spectrum that the likelihood fits use)."""
+    sargs = _spectral_args(recs, layout, model, 1, None)
+    p = np.asarray(p, dtype=float)
+    floor = 1e-6 * float(np.median([np.var(np.asarray(r.positions)) for r in recs]))
+    cols = []
+    for i in range(p.size):
+        h = 1e-5 * max(abs(p[i]), floor)
+        up, dn = p.copy(), p.copy()
+        up[i] += h
+        dn[i] = max(dn[i] - h, 0.0)
+        lp = [np.log(np.asarray(_psd_jit(jnp.asarray(q), sargs))) for q in (up, dn)]
+        cols.append((lp[0] - lp[1]) / (up[i] - dn[i]))
+    jac = np.stack(cols, axis=-1)  # (R, M, P)
+    fisher = np.einsum("rmi,rmj->ij", jac * np.asarray(sargs.weight)[..., None], jac)
+    try:
+        return np.sqrt(np.clip(np.diag(np.linalg.inv(fisher)), 0, None))
+    except np.linalg.LinAlgError:
+        return np.full(p.size, np.nan)
+
+
+def _fit_variance(recs, layout, model, method_name, notes):
+    """Variance vs exposure or vs laser power: weighted least squares of the frame
+    variances, with 95 % profile intervals and the joint likelihood's SE for comparison."""
+    if len(recs) < len(layout.names):
+        raise ValueError(
+            f"{method_name} needs at least {len(layout.names)} recordings to fit "
+            f"{layout.names}; got {len(recs)}"
+        )
+    v = np.array([np.var(np.asarray(r.positions, dtype=float)) for r in recs])
+    n = np.array([float(r.n_frames) for r in recs])
+    args = VarianceArgs(layout=layout, model=model, meta=rec_meta(recs), v=jnp.asarray(v),
+                        n=jnp.asarray(n), se=jnp.asarray(v * np.sqrt(2.0 / n)))
+    scale = _start_vector(recs, layout, model.noise)
+    p, cov, chi2, ok, pd, fitted = fit_variances(args, scale)
+    if not bool(ok):
+        raise FitError(f"{method_name}: least squares did not converge; parameters {layout.names}")
+    if not bool(pd):
+        raise FitError(
+            f"{method_name}: parameters {layout.names} are not identifiable from these "
+            "variances (need exposures spanning alpha ~ 0.3-10, or several powers)"
+        )
+    dof = max(len(recs) - len(layout.names), 0)
+    gof = {"test": "weighted chi2 of variances", "statistic": float(chi2), "dof": dof,
+           "p_value": float(chi2_sf(float(chi2), dof)) if dof > 0 else float("nan")}
+    notes = list(notes)
+    names = layout.names
+    # 95 % profile-likelihood intervals: the Wald interval (value +- 1.96 SE) is not honest
+    # here (k = kT/sigma^2 with sigma^2 and eps^2 separated only by the curvature of
+    # S(alpha), and eps^2 >= 0: skewed, bounded estimates; benchmarks/RESULTS_variance_methods.md)
+    prof = profile_intervals(fitted, p, chi2)
+    intervals = {names[i]: prof[i] for i in range(len(names))}
+    wald = np.sqrt(np.clip(np.diag(cov), 0, None))
+    txt = []
+    for i, name in enumerate(names):
+        lo, hi = intervals[name]
+        fac, unit = _LAB_UNITS.get(name.split("[")[0], (1.0, "SI"))
+        txt.append(f"{name} [{lo * fac:.4g}, {hi * fac:.4g}] {unit}")
+    notes.append("95 % profile-likelihood intervals (chi^2 profile, eps^2 >= 0; in "
+                 "result.intervals, SI): " + "; ".join(txt) + ". Use them rather "
+                 "than value +- 1.96 SE: the variance methods' estimates are skewed and the "
+                 "Wald interval under- or over-covers")
+    unbounded = [nm for nm, (lo, hi) in intervals.items()
+                 if not np.isfinite(hi) or (lo == 0.0 and nm != "tracking_var")]
+    if unbounded:
+        notes.append(f"{method_name}: the data do not bound {unbounded} within a factor 1000 "
+                     "(weakly identified: exposures or powers too close, or alpha << 1)")
+    extras: dict[str, Any] = {"intervals": intervals}
+    try:
+        jse = _joint_likelihood_se(recs, layout, model, p)
+        nk = 1 if layout.linear_power else layout.n_k
+        # this method's effective SE: the 95 % profile interval's half width / 1.96 (the
+        # Wald SE is inflated where eps^2 sits on its bound)
+        eff = np.array([(hi - lo) / (2 * 1.959964) if np.isfinite(hi - lo) else w
+                        for (lo, hi), w in zip(prof.values(), wald)])
+        ratio = float(np.median(eff[:nk] / jse[:nk]))
+        g_ratio = float(eff[nk] / jse[nk])
+        if np.isfinite(ratio):
+            extras["joint_se_ratio"] = ratio
+            notes.append(f"the joint likelihood on these recordings gives ~{ratio:.2g}x smaller "
+                         f"SE of k (and ~{g_ratio:.2g}x of gamma) than this method's 95 % intervals "
+                         "imply: predicted from its Fisher information at this estimate; "
+                         "calibrate(..., method='likelihood')")
+    except Exception:  # noqa: BLE001 - an advisory note only
+        pass
+    return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
+                     interval_source=_given_intervals(intervals))
+
+
+def _fit_allan(recs, layout, model, notes):
+    """k, gamma, eps^2 from the overlapping Allan variance (exact expectation and covariance,
+    iterated GLS); errors from the GLS information, goodness of fit from its chi^2."""
+    if model.extra or not model.alias:
+        raise ValueError("method 'allan' fits the closed-form frame model (naive, blur or "
+                         f"standard); got model {model.name!r}")
+    scale = _start_vector(recs, layout, model.noise)
+    p, cov, chi2, dof, ok, pd, est = fit_allan(recs, layout, rec_meta(recs), model.blur, scale)
+    if not bool(ok):
+        raise FitError(f"allan: the fit did not converge; parameters {layout.names}")
+    if not bool(pd):
+        raise FitError(f"allan: parameters {layout.names} are not identifiable from these "
+                       "Allan variances (dt >> tau leaves no temporal information)")
+    gof = {"test": "chi2 of Allan variances (exact covariance)", "statistic": float(chi2),
+           "dof": dof, "p_value": float(chi2_sf(float(chi2), dof)) if dof > 0 else float("nan")}
+    notes = list(notes) + [f"allan: overlapping Allan variance at {len(e.m)} octave cluster "
+                           f"sizes (1..{int(e.m[-1])} frames) of {e.n_frames} frames" for e in est]
+    return _assemble(recs, layout, model, "allan", p, cov, gof, notes,
+                     extras={"allan": [e.to_dict() for e in est]})
+
+
+def _equipartition(recs, diffusion, pade):
+    """k per recording from its frame variance: naive ``kT/var``, or blur-corrected with a
+    given D (exact or Pade inversion of var = kT/k S(alpha))."""
+    ks, kerr = [], []
+    notes = []
+    for r in recs:
+        v, se = empirical_variance_se(r.positions)
+        kt = BOLTZMANN * float(r.temperature)
+        if diffusion is None:
+            k = kt / v
+            ks.append(k)
+            kerr.append(k * se / v)
+        else:
+            from ..physics._blur import stiffness_from_variance
+
+            meth = "pade" if pade else "exact"
+            k = float(stiffness_from_variance(v, diffusion, float(r.exposure), float(r.temperature),
+                                              method=meth))
+            h = v * 1e-6
+            dk = (float(stiffness_from_variance(v + h, diffusion, float(r.exposure),
+                                                float(r.temperature), method=meth)) - k) / h
+            ks.append(k)
+            kerr.append(abs(dk) * se)
+    if diffusion is None:
+        notes.append("naive equipartition k = kT/var(X_m): biased high by motion blur "
+                     "(var is reduced by S(alpha)) and low by tracking noise (var is raised)")
+        gamma, gerr = math.nan, math.nan
+    else:
+        notes.append(f"blur-corrected equipartition with given D = {diffusion:.4g} m^2/s "
+                     f"({'Pade' if pade else 'exact'} inversion)")
+        gamma = BOLTZMANN * float(recs[0].temperature) / diffusion
+        gerr = 0.0
+    names = tuple(f"k[{i}]" for i in range(len(recs))) if len(recs) > 1 else ("k",)
+    values = np.array(ks + ([gamma] if diffusion is not None else []))
+    errs = np.array(kerr + ([gerr] if diffusion is not None else []))
+    names = names + (("gamma",) if diffusion is not None else ())
+    return CalibrationResult(
+        method="equipartition",
+        model="naive" if diffusion is None else "blur",
+        param_names=names,
+        values=values,
+        covariance=np.diag(errs**2),
+        temperature=float(recs[0].temperature),
+        k_per_recording=np.array(ks),
+        k_per_recording_err=np.array(kerr),
+        gof={},
+        n_recordings=len(recs),
+        n_frames=int(sum(r.n_frames for r in recs)),
+        notes=tuple(notes),
+    )
+
