@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..data import XYRecording
-from ..physics import frame_autocovariance
+from ..physics import frame_autocovariance, psd_measured
 from ._calibrate import calibrate
 from ._result import LAB, CalibrationResult, FitError
 
@@ -53,6 +53,8 @@ class XYCalibration:
       along x (y held fixed); ``k_xy = K_xy`` couples the axes and vanishes when phi = 0.
       Note ``kT / <x^2>`` (equipartition along x) is ``1 / (K^-1)_xx``, not ``K_xx``.
     - `gamma` [N s/m] and `tracking_var` [m^2]: shared by both axes (joint fit).
+    - `expected_gamma_se`: expected (Fisher) SE of gamma [N s/m] from (the joint fit, axis 1
+      alone, axis 2 alone) at the fitted values; ``gamma_precision_gain`` is their ratio.
     - `joint`: the joint :class:`CalibrationResult` of the two projected traces;
       `separate`: the two single-axis fits (None for an axis whose fit fails, e.g. a stiff
       axis that alone cannot identify gamma), for the precision gain of sharing gamma.
@@ -82,6 +84,7 @@ class XYCalibration:
     n_frames: int
     joint: CalibrationResult
     separate: tuple[CalibrationResult | None, CalibrationResult | None] | None
+    expected_gamma_se: tuple[float, float, float] = (math.nan, math.nan, math.nan)
     notes: tuple[str, ...] = ()
 
     @property
@@ -105,8 +108,12 @@ class XYCalibration:
 
     @property
     def gamma_precision_gain(self) -> float:
-        """SE of gamma from the better single axis / SE of the shared gamma (> 1: gain)."""
-        return min(self.gamma_err_separate) / self.gamma_err
+        """Expected SE of gamma from the better axis alone / expected SE of the shared gamma
+        (> 1: gain), both from the Whittle Fisher information at the fitted values. Unlike
+        the realised single-axis SEs (``gamma_err_separate``) it is not noisy and not
+        understated when a single-axis fit puts eps^2 at its bound."""
+        joint, a1, a2 = self.expected_gamma_se
+        return min(a1, a2) / joint
 
     def _rows(self):
         kf, ku = LAB["k"]
@@ -135,9 +142,8 @@ class XYCalibration:
         for name, v, e, u in self._rows():
             err = "" if math.isnan(e) else f" +- {e:.3g}"
             lines.append(f"  {name:<24s} {v:.5g}{err} {u}")
-        if self.separate is not None:
-            lines.append(f"  shared-gamma precision gain: {self.gamma_precision_gain:.3g} x "
-                         "(SE of gamma, better axis alone / joint)")
+        lines.append(f"  shared-gamma precision gain: {self.gamma_precision_gain:.3g} x "
+                     "(expected SE of gamma, better axis alone / joint)")
         lines.append(f"  anisotropy: eigenvalue gap = {self.anisotropy_z:.3g} SE "
                      f"({'resolved' if self.resolved else 'NOT resolved: phi undefined'})")
         lines.extend(f"  note: {n}" for n in self.notes)
@@ -169,7 +175,8 @@ class XYCalibration:
             principal_axes=self.principal_axes.tolist(),
             frame_covariance=np.asarray(self.frame_covariance).tolist(),
             gamma_err_separate=list(self.gamma_err_separate),
-            gamma_precision_gain=float(self.gamma_precision_gain) if self.separate else None,
+            expected_gamma_se=list(self.expected_gamma_se),
+            gamma_precision_gain=float(self.gamma_precision_gain),
             notes=list(self.notes), joint=self.joint.to_dict())
         return out
 
@@ -209,6 +216,45 @@ def _angle_stats(k1, k2, gamma, eps2, xy: XYRecording, l1, l2):
     return phi_err, z
 
 
+def _whittle_information(k, gamma, eps2, xy: XYRecording, noise: bool) -> np.ndarray:
+    """Expected (Whittle) Fisher information of one axis's frames for (k, gamma[, eps2]):
+    ``sum_f d log P d log P^T`` over the positive Fourier frequencies of N frames; the
+    derivatives in k and gamma by central differences in log, in eps2 exactly
+    (``dP/deps2 = dt``)."""
+    n, dt = xy.n_frames, xy.frame_interval
+    f = np.arange(1, (n + 1) // 2) / (n * dt)
+
+    def logp(kk, gg):
+        return np.log(np.asarray(psd_measured(f, kk, gg, xy.exposure, xy.temperature, dt,
+                                              max(eps2, 0.0))))
+
+    h = 1e-5
+    grads = [(logp(k * (1 + h), gamma) - logp(k * (1 - h), gamma)) / (2 * h * k),
+             (logp(k, gamma * (1 + h)) - logp(k, gamma * (1 - h))) / (2 * h * gamma)]
+    if noise:
+        grads.append(dt / np.exp(logp(k, gamma)))
+    g = np.stack(grads)
+    return g @ g.T
+
+
+def _expected_gamma_se(k1, k2, gamma, eps2, xy: XYRecording, noise: bool):
+    """Expected SE of gamma from ``(joint, axis 1 alone, axis 2 alone)`` (Whittle Fisher)."""
+    i1 = _whittle_information(k1, gamma, eps2, xy, noise)
+    i2 = _whittle_information(k2, gamma, eps2, xy, noise)
+    m = i1.shape[0]  # (k, gamma[, eps2]); joint: (k1, k2, gamma[, eps2])
+    joint = np.zeros((m + 1, m + 1))
+    for i, info in ((0, i1), (1, i2)):
+        sel = [i] + list(range(2, m + 1))
+        joint[np.ix_(sel, sel)] += info
+    out = []
+    for info, ig in ((joint, 2), (i1, 1), (i2, 1)):
+        try:
+            out.append(float(math.sqrt(np.linalg.inv(info)[ig, ig])))
+        except (np.linalg.LinAlgError, ValueError):
+            out.append(math.inf)
+    return tuple(out)
+
+
 def _tensor(k1, k2, phi, cov3):
     """K_xx, K_yy, K_xy and their SEs from (k1, k2, phi) with covariance `cov3`."""
     c, s = math.cos(phi), math.sin(phi)
@@ -223,11 +269,16 @@ def _tensor(k1, k2, phi, cov3):
 def _alone(rec, i: int, notes: list, kwargs):
     """The fit of one principal axis alone, or None (with a note) when it fails."""
     try:
-        return calibrate(rec, **kwargs)
+        res = calibrate(rec, **kwargs)
     except FitError as e:
         notes.append(f"axis {i} alone does not give a calibration (its gamma error counts as "
-                     f"infinite in the precision gain): {str(e).splitlines()[0]}")
+                     f"infinite): {str(e).splitlines()[0]}")
         return None
+    if res.at_bounds:
+        notes.append(f"axis {i} alone: {', '.join(res.at_bounds)} at its bound, so that fit's "
+                     "errors are conditional on it (too small); gamma_precision_gain uses the "
+                     "expected errors instead")
+    return res
 
 
 def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalibration:
@@ -256,14 +307,15 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
     u, v = xy.project(phi)
     joint = calibrate([u, v], k="per_recording", **kwargs)
     names = list(joint.param_names)
-    idx = [i for i, n in enumerate(names) if n.startswith("k[")] + [names.index("gamma")]
-    cov_kg = np.asarray(joint.covariance)[np.ix_(idx, idx)]
+    idx = [i for i, n in enumerate(names) if n.startswith("k[")]
+    cov_k = np.asarray(joint.covariance)[np.ix_(idx, idx)]
     k1, k2 = (float(x) for x in joint.k_per_recording)
     gamma = float(joint.gamma)
-    eps2 = float(joint.tracking_var) if "tracking_var" in names else 0.0
+    noise = "tracking_var" in names
+    eps2 = float(joint.tracking_var) if noise else 0.0
     phi_err, z = _angle_stats(k1, k2, gamma, eps2, xy, l1, l2)
     cov3 = np.zeros((3, 3))
-    cov3[:2, :2] = cov_kg[:2, :2]
+    cov3[:2, :2] = cov_k
     cov3[2, 2] = phi_err**2 if math.isfinite(phi_err) else 0.0
     (kxx, kyy, kxy), (exx, eyy, exy) = _tensor(k1, k2, phi, cov3)
     notes = []
@@ -273,14 +325,17 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
                      f"the two axes is {z:.2g} standard errors (< {RESOLVE_Z:g}); the trap is "
                      "isotropic within errors, so phi is undefined (its value and error mean "
                      "nothing); k1 and k2 are the stiffnesses along two perpendicular axes")
+    expected = (math.nan,) * 3
+    if "gamma" in names:
+        expected = _expected_gamma_se(k1, k2, gamma, eps2, xy, noise)
     seps = None
     if separate:
         seps = tuple(_alone(r, i, notes, kwargs) for i, r in enumerate((u, v), start=1))
     return XYCalibration(
-        k1=k1, k1_err=float(math.sqrt(cov_kg[0, 0])), k2=k2,
-        k2_err=float(math.sqrt(cov_kg[1, 1])), phi=phi, phi_err=phi_err, gamma=gamma,
-        gamma_err=float(math.sqrt(cov_kg[2, 2])), tracking_var=eps2, k_x=kxx, k_x_err=exx,
+        k1=k1, k1_err=float(math.sqrt(cov_k[0, 0])), k2=k2,
+        k2_err=float(math.sqrt(cov_k[1, 1])), phi=phi, phi_err=phi_err, gamma=gamma,
+        gamma_err=float(joint.gamma_err), tracking_var=eps2, k_x=kxx, k_x_err=exx,
         k_y=kyy, k_y_err=eyy, k_xy=kxy, k_xy_err=exy, frame_covariance=cov,
         anisotropy_z=float(z), resolved=bool(resolved), temperature=float(xy.temperature),
-        n_frames=xy.n_frames, joint=joint, separate=seps,
+        n_frames=xy.n_frames, joint=joint, separate=seps, expected_gamma_se=expected,
         notes=tuple(notes) + tuple(joint.notes))
