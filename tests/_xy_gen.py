@@ -3,7 +3,7 @@
 Each principal axis is a stationary Gaussian sequence with the exact autocovariance of
 exposure-averaged OU frames, written here from the formulas (C(0) = sigma2 S(a),
 C(n) = sigma2 B(a) rho^n, a = W/tau, rho = exp(-dt/tau)) and drawn by circulant embedding
-(FFT of length 2N; the real and imaginary parts give the two independent axes). The frames
+(FFT of length 2N, one complex Gaussian draw per axis). The frames
 are then rotated by phi and isotropic white tracking noise is added to x and y. Nothing of
 blurtrap is used.
 """
