@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from ._constants import BOLTZMANN as BOLTZMANN
     from .data import Recording as Recording
     from .data import RecordingSet as RecordingSet
+    from .data import XYRecording as XYRecording
     from .data import from_arrays as from_arrays
     from .data import load as load
     from .data import load_bluelake as load_bluelake
@@ -34,8 +35,10 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .data import load_manifest as load_manifest
     from .data import load_npz as load_npz
     from .data import load_tdms as load_tdms
+    from .data import load_xy_csv as load_xy_csv
     from .data import save_manifest as save_manifest
     from .data import save_npz as save_npz
+    from .data import xy_from_arrays as xy_from_arrays
     from .design import DesignResult as DesignResult
     from .design import design as design
     from .diagnostics import Diagnosis as Diagnosis
@@ -52,9 +55,11 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .inference import ShortChainWarning as ShortChainWarning
     from .inference import TrapModel as TrapModel
     from .inference import Uniform as Uniform
+    from .inference import XYCalibration as XYCalibration
     from .inference import allan_variance as allan_variance
     from .inference import calibrate as calibrate
     from .inference import calibrate_batch as calibrate_batch
+    from .inference import calibrate_xy as calibrate_xy
     from .inference import fit_psd as fit_psd
     from .inference import sample_posterior as sample_posterior
     from .inference import stokes_gamma_prior as stokes_gamma_prior
@@ -83,6 +88,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .simulate import TrapezoidProfile as TrapezoidProfile
     from .simulate import quartic_force as quartic_force
     from .simulate import simulate as simulate
+    from .simulate import simulate_xy as simulate_xy
     from .sweeps import SweepResult as SweepResult
     from .sweeps import sweep as sweep
 
@@ -125,6 +131,9 @@ _LAZY = {
     "load_bluelake": "data", "load_h5": "data", "load_tdms": "data",
     # sweeps
     "sweep": "sweeps", "SweepResult": "sweeps",
+    # x/y recordings
+    "XYRecording": "data", "load_xy_csv": "data", "xy_from_arrays": "data",
+    "XYCalibration": "inference", "calibrate_xy": "inference", "simulate_xy": "simulate",
 }
 # subpackages that ``import blurtrap`` used to make available as attributes
 _SUBMODULES = ("_config", "data", "diagnostics", "inference", "physics")

@@ -26,3 +26,7 @@ from ._recording import TimingJitter as TimingJitter
 from ._recording_set import RecordingSet as RecordingSet
 from ._tdms import load_tdms as load_tdms
 from ._units import ALLOWED_UNITS as ALLOWED_UNITS
+from ._xy import XYRecording as XYRecording
+from ._xy import load_xy_csv as load_xy_csv
+from ._xy import write_xy_csv as write_xy_csv
+from ._xy import xy_from_arrays as xy_from_arrays

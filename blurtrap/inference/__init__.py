@@ -70,3 +70,5 @@ from ._variance import (
 from ._variance import (
     highpass_variance_curve as highpass_variance_curve,
 )
+from ._xy import XYCalibration as XYCalibration
+from ._xy import calibrate_xy as calibrate_xy

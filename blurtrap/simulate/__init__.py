@@ -70,3 +70,4 @@ from ._simulate import (
 from ._simulate import (
     simulate as simulate,
 )
+from ._xy import simulate_xy as simulate_xy
