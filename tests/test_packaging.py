@@ -25,7 +25,8 @@ PACKAGE = ROOT / "blurtrap"
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 # import name -> the extra of [project.optional-dependencies] that provides it
-OPTIONAL_LAZY = {"arviz": "arviz", "pandas": "pandas", "h5py": "h5py", "nptdms": "tdms"}
+OPTIONAL_LAZY = {"arviz": "arviz", "pandas": "pandas", "h5py": "h5py", "nptdms": "tdms",
+                 "xarray": "xarray"}
 # import name -> distribution name, where they differ
 DIST_NAME = {"nptdms": "npTDMS"}
 
