@@ -17,6 +17,7 @@ import numpy as np
 from .._config import float64_scope
 from ._frames import _inspect_frames, temporal_information
 from ._instrument import finish_instrument, prepare_instrument
+from ._irregular import any_irregular
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
@@ -267,6 +268,8 @@ def _choose_likelihood(recs, mdl, likelihood, f_range, excluded, robust, notes):
     whether the exact one may still replace a Whittle fit whose relaxation time turns out
     long. Raises for an explicit ``likelihood='exact'`` that the model or options exclude."""
     use = likelihood
+    if any_irregular(recs):
+        return _irregular_choice(mdl, likelihood, f_range, excluded, robust, notes), False
     if use == "auto":
         use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
         if (f_range is not None or excluded or robust) and use == "exact":
@@ -297,6 +300,26 @@ def _choose_likelihood(recs, mdl, likelihood, f_range, excluded, robust, notes):
     return use, exact_ok
 
 
+def _irregular_choice(mdl, likelihood, f_range, excluded, robust, notes) -> str:
+    """Irregular time stamps: the exact likelihood at the recorded times where the model and
+    options allow it (closed-form, aliased, every frequency); otherwise the Whittle fit on the
+    nominal grid, with a note that the jitter is ignored (an explicit ``'exact'`` raises)."""
+    why = ("the model adds effects" if mdl.extra else "the model is not aliased"
+           if not mdl.alias else "f_range / excluded / robust select frequencies"
+           if (f_range is not None or excluded or robust) else "")
+    if likelihood == "whittle" or why:
+        if likelihood == "exact":
+            raise ValueError(f"the exact likelihood at irregular frame times is not available: "
+                             f"{why}; use likelihood='whittle' (frames treated as regular)")
+        notes.append("time stamps irregular: this fit treats the frames as regular (the "
+                     "Whittle likelihood needs a regular grid"
+                     + (f"; the exact likelihood at the recorded times is unavailable: {why}"
+                        if why else "; likelihood='exact' fits the recorded times") + ")")
+        return "whittle"
+    notes.append("likelihood: exact, at the recorded (irregular) frame times")
+    return "exact"
+
+
 def _fit_likelihood(recs, layout, mdl, likelihood, f_range, excluded, robust, start, strict,
                     fixed, notes):
     """``method='likelihood'``: the exact or the Whittle likelihood (see
@@ -304,7 +327,7 @@ def _fit_likelihood(recs, layout, mdl, likelihood, f_range, excluded, robust, st
     the exact fit (``likelihood='auto'``) or gets a note."""
     use, exact_ok = _choose_likelihood(recs, mdl, likelihood, f_range, excluded, robust, notes)
     if use == "exact":
-        if not notes or not notes[-1].startswith("likelihood: exact"):
+        if not any(n.startswith("likelihood: exact") for n in notes):
             notes.append("likelihood: exact")
         return _fit_exact(recs, layout, mdl, notes, fixed)
     res = _fit_spectral(recs, layout, mdl, 1, f_range, "likelihood", list(notes), start,

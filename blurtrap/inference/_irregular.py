@@ -140,6 +140,11 @@ def frame_intervals(rec) -> np.ndarray:
     return np.append(d, d[-1] if d.size else float(rec.frame_interval))
 
 
+def any_irregular(recordings) -> bool:
+    """Whether a recording keeps irregular time stamps (``allow_irregular=True``)."""
+    return any(r.times is not None and not r.is_regular for r in recordings)
+
+
 def check_irregular_model(model: TrapModel, recordings) -> None:
     """The state-space form covers the closed-form models (rectangular exposure, white
     tracking noise); every interval must be at least the exposure (no overlapping frames)."""

@@ -17,6 +17,7 @@ from ._fixed import expand as expand_fixed
 from ._fixed import propagate as propagate_fixed
 from ._fixed import reduce as reduce_fixed
 from ._fixed import reduced_objective
+from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
 from ._refusals import _check_fit, _check_relaxation_resolved
@@ -114,8 +115,13 @@ def _fit_held(fit, nll, scale, args, names, fixed):
 
 def _fit_exact(recs, layout, model, notes, fixed=None):
     """Exact time-domain (ARMA) likelihood fit, started from the Whittle estimate (and also
-    from the closed forms where Whittle is unreliable, keeping the better optimum)."""
-    args = make_exact_args(recs, layout, model)
+    from the closed forms where Whittle is unreliable, keeping the better optimum). Recordings
+    with irregular time stamps use the exact likelihood at the recorded frame times
+    (:mod:`blurtrap.inference._irregular`)."""
+    if any_irregular(recs):
+        args, nll = make_irregular_args(recs, layout, model), irregular_nll
+    else:
+        args, nll = make_exact_args(recs, layout, model), exact_nll
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     moment = _start_vector(recs, layout, model.noise)
@@ -130,7 +136,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
         starts.append(moment)
     out = s_out = held = None
     for s0 in starts:
-        cand, h0 = _fit_held(fit_ml_fd_newton, exact_nll, s0, args, names, fixed)
+        cand, h0 = _fit_held(fit_ml_fd_newton, nll, s0, args, names, fixed)
         if out is None or (bool(cand.converged) and (not bool(out.converged)
                                                       or float(cand.nll) < float(out.nll))):
             out, s_out, held = cand, s0, h0
@@ -142,7 +148,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     extras = {"loglik": -float(out.nll)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound,
-                    interval_source=_interval_source(exact_nll, args, s_out, out, held,
+                    interval_source=_interval_source(nll, args, s_out, out, held,
                                                      hessian="fd"))
     return _check_relaxation_resolved(res, recs, "likelihood (exact)")
 

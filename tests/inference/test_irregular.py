@@ -129,3 +129,50 @@ def test_exposure_terms_against_mpmath(alpha):
     got = _exposure_terms(jnp.asarray(alpha))
     for g, r in zip(got, ref, strict=True):
         assert float(g) == pytest.approx(r, rel=1e-11)
+
+
+def _dropped_frames_recording(seed, n=2048):
+    """A camera recording with 5 % of the frames missing (their interval is 2 dt), drawn
+    exactly by tests/_irregular_gen.py (dense Cholesky, not blurtrap's simulator)."""
+    import _irregular_gen as gen
+
+    import blurtrap as bt
+
+    k, gamma, temp, dt = 3.6e-6, 9.0e-9, 295.0, 1e-3
+    r = np.random.default_rng(seed)
+    t = gen.clock("dropped", n, dt, 0.05, r)
+    x = gen.frames(t, 0.5 * dt, k, gamma, temp, 4e-18, r, offset=1e-7)
+    rec = bt.Recording(x, frame_interval=dt, exposure=0.5 * dt, temperature=temp, times=t,
+                       allow_irregular=True)
+    return rec, k, gamma
+
+
+def test_calibrate_fits_the_recorded_frame_times():
+    """The remedy for timing jitter: with the time stamps the exact likelihood at the recorded
+    times recovers k and gamma (the regular-grid fit of the same frames ignores the gaps)."""
+    import blurtrap as bt
+
+    rec, k, gamma = _dropped_frames_recording(11)
+    res = bt.calibrate(rec)
+    assert any("recorded (irregular) frame times" in n for n in res.notes)
+    assert abs(res.k - k) < 3 * res.k_err
+    assert abs(res.gamma - gamma) < 3 * res.gamma_err
+    # the likelihood maximised is the one at the recorded times, not the regular-grid one
+    from blurtrap.inference._irregular import irregular_loglik
+    from blurtrap.physics._constants import BOLTZMANN
+
+    d = np.append(np.diff(np.asarray(rec.times)), 1e-3)
+    ll = irregular_loglik(jnp.asarray(rec.positions), jnp.asarray(d), rec.exposure,
+                          BOLTZMANN * rec.temperature / res.k, res.gamma / res.k,
+                          res.tracking_var)
+    assert float(ll) == pytest.approx(res.extras["loglik"], rel=1e-12)
+
+
+def test_irregular_times_with_a_spectral_model_say_so():
+    import blurtrap as bt
+
+    rec, _, _ = _dropped_frames_recording(12, n=1024)
+    res = bt.calibrate(rec, likelihood="whittle")
+    assert any("treats the frames as regular" in n for n in res.notes)
+    with pytest.raises(ValueError, match="irregular frame times is not available"):
+        bt.calibrate(rec, model="standard+drift", likelihood="exact")
