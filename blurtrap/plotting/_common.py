@@ -154,11 +154,14 @@ def sample_variance_se_np(n, k, gamma, exposure, frame_interval, temperature, tr
     return np.sqrt(2.0 / n * (c0**2 + 2.0 * c1**2 / (1.0 - rho**2)))
 
 
-def model_psd(params, recording, f, model=None, index: int = 0):
+def model_psd(params, recording, f, model=None, index: int = 0, block_len=None):
     """Two-sided model PSD [m^2/Hz] of a fitted model for ``recording`` at ``f`` [Hz].
 
     ``model`` defaults to the model of a ``CalibrationResult`` (``naive``, ``naive_aliased``,
-    ``blur``, ``standard``), else ``standard``."""
+    ``blur``, ``standard``), else ``standard``. With ``block_len`` (frames per periodogram
+    block) a closed-form aliased model gives the exact *expected periodogram* of such a block
+    (finite-block leakage included, as the spectral fits use), so that data/model of a
+    blocked periodogram has mean 1 also for blocks only a few relaxation times long."""
     import jax.numpy as jnp
 
     from .._config import x64_context
@@ -173,9 +176,11 @@ def model_psd(params, recording, f, model=None, index: int = 0):
     with x64_context(True):
         f2 = jnp.asarray(np.asarray(f, dtype=float)[None, :])
         one = lambda v: jnp.asarray([float(v)])  # noqa: E731
+        bl = (one(block_len) if block_len is not None and mdl.alias and mdl.closed_form
+              else None)
         p = mdl.psd(f2, one(k), one(g), jnp.asarray(e2), one(recording.frame_interval),
                     one(recording.exposure), one(t),
-                    extras={n: jnp.asarray(v) for n, v in extras.items()})
+                    extras={n: jnp.asarray(v) for n, v in extras.items()}, block_len=bl)
         return np.asarray(p, dtype=float)[0]
 
 

@@ -68,7 +68,8 @@ def fig6_psd(recording, fits=None, *, n_blocks=None, one_sided=True, ax=None):
         style["label"] = label
         k, g, e2, _ = trap_params(fit)
         style["label"] += f": k = {k * 1e3:.4g} pN/nm, gamma = {g * 1e6:.4g} pN s/um"
-        ax.loglog(f, fac * model_psd(fit, recording, f) * NM2, **style)
+        ax.loglog(f, fac * model_psd(fit, recording, f, block_len=recording.n_frames // nb)
+                  * NM2, **style)
     ax.set_xlabel("frequency f [Hz]")
     ax.set_ylabel(("one-sided" if one_sided else "two-sided") + " PSD [nm$^2$/Hz]")
     ax.set_title(f"Fig. 6: power spectrum, fs = {recording.sampling_rate:.5g} Hz, "
@@ -90,7 +91,7 @@ def fig7_deviation(recording, fit, *, n_blocks=None, bins=25, fig=None):
     """
     nb = fit_n_blocks(fit, recording, n_blocks)
     f, p, nb = blocked_psd(recording, nb)
-    ratio = p / model_psd(fit, recording, f)
+    ratio = p / model_psd(fit, recording, f, block_len=recording.n_frames // nb)
     sd = 1.0 / math.sqrt(nb)
     fig, (a1, a2) = new_figure(1, 2, figsize=(9.0, 3.8), fig=fig,
                                gridspec_kw=dict(width_ratios=(2, 1)))
@@ -159,7 +160,8 @@ def _residuals(fit, recs, n_blocks, blocks_of):
         nb = max(1, min(nb, rec.n_frames // 4))
         f, p, nb = blocked_psd(rec, nb)
         idx = i if len(recs) > 1 and n_k == len(recs) else 0
-        out.append((f, p / model_psd(fit, rec, f, index=idx), np.full(f.size, 1.0 / nb)))
+        model = model_psd(fit, rec, f, index=idx, block_len=rec.n_frames // nb)
+        out.append((f, p / model, np.full(f.size, 1.0 / nb)))
     return out
 
 
