@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from ._base import AbstractEffect as AbstractEffect
 from ._base import Param as Param
+from ._base import StartContext as StartContext
 from ._quantities import CORE, DERIVED
 from .aliasing import Aliasing as Aliasing
 from .anharmonicity import Anharmonicity as Anharmonicity
@@ -55,5 +56,6 @@ def lab_units(name: str) -> tuple[float, str]:
     return (q.lab_factor, q.lab_unit) if q is not None else (1.0, "SI")
 
 
-__all__ = ["EFFECTS", "QUANTITIES", "AbstractEffect", "Param", "lab_units", "make_effect",
+__all__ = ["EFFECTS", "QUANTITIES", "AbstractEffect", "Param", "StartContext", "lab_units",
+           "make_effect",
            *(cls.__name__ for cls in EFFECTS.values())]

@@ -31,9 +31,24 @@ weak to be seen in the data is reported as such by ``diagnose`` rather than gues
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import ClassVar
 
 import equinox as eqx
+
+
+@dataclasses.dataclass(frozen=True)
+class StartContext:
+    """What a start rule may use: medians over the recordings of the frame variance [m^2],
+    the record duration [s], the sampling rate [Hz] and the temperature [K]; the laser powers
+    [W] (empty when unknown) and the friction of the trap fit the effect is added to [N s/m]."""
+
+    variance: float
+    duration: float
+    sampling_rate: float
+    temperature: float
+    powers: tuple[float, ...]
+    gamma: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +57,8 @@ class Param:
     ``unit``, lab units (value in lab units = ``lab_factor`` x SI value, ``lab_unit``), a
     ``description``, the largest value a fit may take (``upper``, SI) and ``bounds``, the
     physically plausible range that is the support of the default prior (``None`` for
-    quantities that are not fitted)."""
+    quantities that are not fitted) and ``start``, the rule for a rough positive start value
+    of a fit (:class:`StartContext` -> SI value; refined by the fit)."""
 
     name: str
     unit: str
@@ -51,6 +67,8 @@ class Param:
     description: str
     upper: float = float("inf")
     bounds: tuple[float, float] | None = None
+    start: Callable[[StartContext], float] | None = dataclasses.field(default=None,
+                                                                       compare=False)
 
 
 class AbstractEffect(eqx.Module):

@@ -30,9 +30,9 @@ class DetectorFilter(AbstractEffect):
     kind: ClassVar[str] = "transfer"
     params: ClassVar = (
         Param("f3db", "Hz", 1.0, "Hz", "photodiode 3 dB frequency",
-              bounds=(1.0, 1e8)),
+              bounds=(1.0, 1e8), start=lambda c: min(0.25 * c.sampling_rate, 8000.0)),
         Param("diode_alpha", "1", 1.0, "", "fast-response fraction", 1.0,
-              bounds=(1e-6, 1.0)),
+              bounds=(1e-6, 1.0), start=lambda c: 0.3),
     )
     signature: ClassVar[str] = "high-frequency deficit with a low-pass shape"
 

@@ -45,7 +45,8 @@ class Drift(AbstractEffect):
     name: ClassVar[str] = "drift"
     kind: ClassVar[str] = "additive"
     params: ClassVar = (Param("drift_diffusion", "m^2/s", 1e18, "nm^2/s", "drift diffusion",
-                              bounds=(1e-30, 1e-8)),)
+                              bounds=(1e-30, 1e-8),
+                              start=lambda c: 0.01 * c.variance / c.duration),)
     signature: ClassVar[str] = "excess power at the lowest frequencies (~1/f^2)"
 
     def psd_add(self, f, dt, extras):

@@ -33,7 +33,7 @@ class ExposureKernel(AbstractEffect):
     name: ClassVar[str] = "exposure_kernel"
     kind: ClassVar[str] = "transfer"
     params: ClassVar = (Param("rise_fraction", "1", 1.0, "", "rise/fall time / W", 0.5,
-                              bounds=(1e-6, 0.5)),)
+                              bounds=(1e-6, 0.5), start=lambda c: 0.1),)
     signature: ClassVar[str] = "high-frequency spectral shape unlike sinc^2"
 
     def transfer(self, f, w, extras):

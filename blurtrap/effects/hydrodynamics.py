@@ -9,7 +9,17 @@ import jax.numpy as jnp
 
 from ..physics import POLYSTYRENE_DENSITY, hydro_lorentzian, water_density, water_viscosity
 from ..physics._constants import BOLTZMANN
-from ._base import AbstractEffect, Param
+from ._base import AbstractEffect, Param, StartContext
+
+
+def _stokes_radius(c: StartContext) -> float:
+    """The radius whose Stokes friction in water is the trap fit's gamma."""
+    import math
+
+    import numpy as np
+
+    eta = float(water_viscosity(float(np.clip(c.temperature, 274.0, 373.0))))
+    return c.gamma / (6.0 * math.pi * eta)
 
 
 class Hydrodynamics(AbstractEffect):
@@ -43,7 +53,7 @@ class Hydrodynamics(AbstractEffect):
     name: ClassVar[str] = "hydrodynamics"
     kind: ClassVar[str] = "friction"
     params: ClassVar = (Param("hydro_radius", "m", 1e6, "um", "hydrodynamic radius",
-                              bounds=(1e-9, 1e-3)),)
+                              bounds=(1e-9, 1e-3), start=_stokes_radius),)
     signature: ClassVar[str] = "small high-frequency excess over the Lorentzian"
 
     distance: float | None = eqx.field(static=True, default=None)

@@ -16,5 +16,5 @@ class LaserHeating(AbstractEffect):
     name: ClassVar[str] = "laser_heating"
     kind: ClassVar[str] = "relation"
     params: ClassVar = (Param("heating", "K/W", 1.0, "K/W", "heating coefficient b",
-                              bounds=(1e-3, 1e4)),)
+                              bounds=(1e-3, 1e4), start=lambda c: 10.0),)
     signature: ClassVar[str] = "gamma falls with laser power"

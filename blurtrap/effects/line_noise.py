@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import equinox as eqx
@@ -18,7 +19,8 @@ class LineNoise(AbstractEffect):
     name: ClassVar[str] = "line_noise"
     kind: ClassVar[str] = "additive"
     params: ClassVar = (Param("line_amplitude", "m", 1e9, "nm", "line amplitude",
-                              bounds=(1e-15, 1e-5)),)
+                              bounds=(1e-15, 1e-5),
+                              start=lambda c: 0.1 * math.sqrt(c.variance)),)
     signature: ClassVar[str] = "isolated spectral spike"
     frequency: float = eqx.field(static=True, default=50.0)
     width: float = eqx.field(static=True, default=0.0)

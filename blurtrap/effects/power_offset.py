@@ -14,5 +14,6 @@ class PowerOffset(AbstractEffect):
     name: ClassVar[str] = "power_offset"
     kind: ClassVar[str] = "relation"
     params: ClassVar = (Param("power_offset", "W", 1e3, "mW", "power offset P0",
-                              bounds=(1e-9, 10.0)),)
+                              bounds=(1e-9, 10.0),
+                              start=lambda c: 0.05 * min(c.powers) if c.powers else 1e-3),)
     signature: ClassVar[str] = "k-vs-power line misses the origin"

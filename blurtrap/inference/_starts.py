@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import x64_context
+from ..effects import QUANTITIES, StartContext
 from ..physics import BOLTZMANN, autocovariance_unchecked
 
 
@@ -79,24 +80,17 @@ def _start_vector(recs, layout, noise, start=None):
 
 
 def effect_start(name: str, recs, gamma: float) -> float:
-    """Rough, positive start values for effect parameters (refined by the fit)."""
-    c0 = float(np.median([np.var(np.asarray(r.positions)) for r in recs]))
-    dur = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
-    fs = float(np.median([1.0 / float(r.frame_interval) for r in recs]))
-    powers = [float(r.laser_power) for r in recs if r.laser_power is not None]
-    temp = float(np.median([float(r.temperature) for r in recs]))
-    from ..physics import water_viscosity
-    table = {
-        "drift_diffusion": 0.01 * c0 / dur,
-        "line_amplitude": 0.1 * math.sqrt(c0),
-        "rise_fraction": 0.1,
-        "f3db": min(0.25 * fs, 8000.0),
-        "diode_alpha": 0.3,
-        "hydro_radius": gamma / (6 * math.pi * float(water_viscosity(np.clip(temp, 274, 373)))),
-        "power_offset": 0.05 * min(powers) if powers else 1e-3,
-        "heating": 10.0,
-    }
-    if name not in table:
+    """Rough, positive start value for an effect parameter (refined by the fit): the
+    parameter's own rule (``Param.start`` in :mod:`blurtrap.effects`)."""
+    q = QUANTITIES.get(name)
+    if q is None or q.start is None:
         raise ValueError(f"no start value rule for effect parameter {name!r}")
-    return table[name]
+    powers = tuple(float(r.laser_power) for r in recs if r.laser_power is not None)
+    ctx = StartContext(
+        variance=float(np.median([np.var(np.asarray(r.positions)) for r in recs])),
+        duration=float(np.median([r.n_frames * float(r.frame_interval) for r in recs])),
+        sampling_rate=float(np.median([1.0 / float(r.frame_interval) for r in recs])),
+        temperature=float(np.median([float(r.temperature) for r in recs])),
+        powers=powers, gamma=float(gamma))
+    return float(q.start(ctx))
 
