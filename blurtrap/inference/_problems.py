@@ -324,11 +324,17 @@ _COARSE_GROUPS = 2048
 _COARSE_MAX_WIDTH = 32
 
 
+def _fused_pass_applies(a: SpectralArgs) -> bool:
+    """The closed-form expected periodogram with no effects (static fields only)."""
+    return bool(a.block_len is not None and not a.model.extra and a.model.closed_form
+                and a.model.alias)
+
+
 def spectral_newton_plan(a: SpectralArgs):
     """``(pass_fn, coarse_args)`` of :class:`SpectralObjective` when the model is the
     closed-form expected periodogram with no effects, else ``None`` (generic autodiff).
     Decided from static fields and shapes only."""
-    if a.block_len is None or a.model.extra or not (a.model.closed_form and a.model.alias):
+    if not _fused_pass_applies(a):
         return None
     width = min(_COARSE_MAX_WIDTH, a.power.shape[-1] // _COARSE_GROUPS)
     return spectral_newton_pass, (_binned_args(a, width) if width >= 2 else None)
@@ -344,7 +350,7 @@ class SpectralObjective(AbstractObjective):
         return _spectral_nll(p, a)
 
     def value_grad_hess(self, x, scale, a: SpectralArgs):
-        if spectral_newton_plan(a) is None:
+        if not _fused_pass_applies(a):
             return super().value_grad_hess(x, scale, a)
         return spectral_newton_pass(x, scale, a)  # looked up at call time (tests patch it)
 
