@@ -23,6 +23,7 @@ from ..physics._blur import _blur_factor, _rho_b
 from ..physics._constants import BOLTZMANN
 from ._likelihood import arma_loglik
 from ._models import TrapModel
+from ._newton import AbstractObjective
 
 K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 
@@ -131,9 +132,9 @@ def spectral_model_psd(p, a: SpectralArgs):
                        extras=extras, block_len=a.block_len)
 
 
-def spectral_nll(p, a: SpectralArgs):
+def _spectral_nll(p, a: SpectralArgs):
     """Whittle/Gamma negative log-likelihood of (blocked) periodogram ordinates of all
-    recordings at once (one vectorised evaluation)."""
+    recordings at once (one vectorised evaluation); :data:`spectral_nll` is its objective."""
     psd = spectral_model_psd(p, a)
     return jnp.sum(a.weight * (jnp.log(psd) - a.log_ref + a.power / psd))
 
@@ -323,17 +324,43 @@ _COARSE_GROUPS = 2048
 _COARSE_MAX_WIDTH = 32
 
 
+def _fused_pass_applies(a: SpectralArgs) -> bool:
+    """The closed-form expected periodogram with no effects (static fields only)."""
+    return bool(a.block_len is not None and not a.model.extra and a.model.closed_form
+                and a.model.alias)
+
+
 def spectral_newton_plan(a: SpectralArgs):
-    """``(pass_fn, coarse_args)`` for :func:`blurtrap.inference._fit.fit_ml` when the model is
-    the closed-form expected periodogram with no effects, else ``None`` (generic autodiff).
+    """``(pass_fn, coarse_args)`` of :class:`SpectralObjective` when the model is the
+    closed-form expected periodogram with no effects, else ``None`` (generic autodiff).
     Decided from static fields and shapes only."""
-    if a.block_len is None or a.model.extra or not (a.model.closed_form and a.model.alias):
+    if not _fused_pass_applies(a):
         return None
     width = min(_COARSE_MAX_WIDTH, a.power.shape[-1] // _COARSE_GROUPS)
     return spectral_newton_pass, (_binned_args(a, width) if width >= 2 else None)
 
 
-spectral_nll.newton_plan = spectral_newton_plan
+class SpectralObjective(AbstractObjective):
+    """The Whittle/Gamma negative log-likelihood ``nll(p, a)`` of :class:`SpectralArgs` as a
+    Newton objective: the fused one-pass value/gradient/Hessian
+    (:func:`spectral_newton_pass`) and the binned coarse data for start values where
+    :func:`spectral_newton_plan` allows them, autodiff otherwise."""
+
+    def __call__(self, p, a: SpectralArgs):
+        return _spectral_nll(p, a)
+
+    def value_grad_hess(self, x, scale, a: SpectralArgs):
+        if not _fused_pass_applies(a):
+            return super().value_grad_hess(x, scale, a)
+        return spectral_newton_pass(x, scale, a)  # looked up at call time (tests patch it)
+
+    def coarse_args(self, a: SpectralArgs):
+        plan = spectral_newton_plan(a)
+        return None if plan is None else plan[1]
+
+
+#: the Whittle/Gamma negative log-likelihood ``spectral_nll(p, a)`` (a callable objective)
+spectral_nll = SpectralObjective()
 
 
 class ExactArgs(eqx.Module):
