@@ -104,7 +104,7 @@ def expand(out: FitOutput, free, n: int, full) -> FitOutput:
         jnp.zeros(n, dtype=bool).at[idx].set(out.at_bound)
     return FitOutput(value=value, cov=cov, nll=out.nll, grad_norm=out.grad_norm,
                      n_steps=out.n_steps, success=out.success, converged=out.converged,
-                     hessian_pd=out.hessian_pd, at_bound=at_bound)
+                     hessian_pd=out.hessian_pd, at_bound=at_bound, result=out.result)
 
 
 _GRADS: dict = {}

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import _autodiff_pass, _newton_iterate, _plan, at_lower_bound
+from ._newton import fd_hessian_pass
 
 #: two-sided 95 % normal quantile and the likelihood drop at a 95 % interval end (chi^2_1)
 Z95 = 1.959963984540054
@@ -52,25 +53,9 @@ _FLAT_ATOL = 1e-7
 
 
 def fd_pass(nll, h=_FD_STEP):
-    """A Newton pass (value, gradient, Hessian in x = log(p / scale)) whose Hessian is the
-    central difference of the exact JAX gradient at ``x +- h e_i`` (one vmapped call), as in
-    :func:`blurtrap.inference._fit.fit_ml_fd_newton`."""
-
-    def f(x, a):
-        args, scale = a
-        return nll(scale * jnp.exp(x), args)
-
-    vg = jax.vmap(jax.value_and_grad(f), in_axes=(0, None))
-
-    def pass_fn(x, scale, args):
-        n = x.shape[0]
-        eye = jnp.eye(n, dtype=x.dtype) * h
-        pts = jnp.concatenate([x[None], x[None] + eye, x[None] - eye])
-        vals, grads = vg(pts, (args, scale))
-        hess = (grads[1:1 + n] - grads[1 + n:]) / (2 * h)
-        return vals[0], grads[0], 0.5 * (hess + hess.T)
-
-    return pass_fn
+    """A Newton pass whose Hessian is the central difference of the exact JAX gradient
+    (:func:`blurtrap.inference._newton.fd_hessian_pass`, as ``fit_ml_fd_newton`` uses)."""
+    return fd_hessian_pass(nll, h)
 
 
 def _pass(nll, args, hessian):
