@@ -29,4 +29,5 @@ DERIVED = (
     Param("frame_interval", "s", 1e3, "ms", "frame interval dt"),
     Param("position", "m", 1e9, "nm", "bead position"),
     Param("laser_power", "W", 1e3, "mW", "laser power"),
+    Param("temperature", "K", 1.0, "K", "temperature at the bead"),
 )

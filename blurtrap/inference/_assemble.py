@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._config import float64_scope
+from ._heating import heating_rows
 from ._profile import ProfileIntervals
 from ._result import CalibrationResult
 
@@ -51,6 +52,10 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
             "record's one end-to-end ramp, so the periodogram ordinates are not independent; "
             "the docstring of blurtrap.inference.EFFECTS['drift']); treat it as an order of "
             "magnitude. The errors of k, gamma and eps^2 stay calibrated.",)
+    extras = dict(extras or {})
+    rows = heating_rows(recs, names, values, cov)
+    if rows:
+        extras["per_recording"] = rows
     return CalibrationResult(
         method=method,
         model=model.name,
@@ -66,7 +71,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         converged=True,
         at_bounds=tuple(at_bounds),
         notes=tuple(notes),
-        extras=extras or {},
+        extras=extras,
         interval_source=interval_source,
     )
 

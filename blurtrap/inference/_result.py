@@ -314,6 +314,10 @@ class CalibrationResult:
         for name in ("displacement_sensitivity", "force_sensitivity"):
             if name in self.param_names:
                 out[name], out[f"{name}_err"] = (_json_float(v) for v in self._get(name))
+        if self.extras.get("per_recording"):
+            out["per_recording"] = [
+                {"name": label, "quantity": q, "value": _json_float(v), "error": _json_float(e)}
+                for label, v, e, q in self.extras["per_recording"]]
         return out
 
     def summary(self) -> str:
@@ -347,6 +351,9 @@ class CalibrationResult:
         if "c" in self.param_names or len(set(map(float, ks))) > 1:
             for i, (kk, ee) in enumerate(zip(ks, es, strict=True)):
                 rows.append((f"k (recording {i})", kk * 1e3, ee * 1e3, "pN/nm"))
+        for label, v, e, q in self.extras.get("per_recording", ()):  # e.g. laser heating
+            fac, unit = LAB.get(q, (1.0, "SI"))
+            rows.append((label, v * fac, e * fac, unit))
         w = max(len(r[0]) for r in rows)
         lines = [f"method: {self.method}   model: {self.model}   recordings: "
                  f"{self.n_recordings}   frames: {self.n_frames}   T = "
