@@ -123,8 +123,18 @@ def main():
     ap.add_argument("--timeout", type=float, default=1800.0)
     ap.add_argument("--out", default=None, help="append JSON lines here")
     args = ap.parse_args()
+    made = not args.old_path and bool(args.old)
     old_root = pathlib.Path(args.old_path) if args.old_path else (
         old_checkout(args.old_rev) if args.old else None)
+    try:
+        run_plan(args, old_root)
+    finally:
+        if made and old_root is not None:  # the worktree this run added
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                            str(old_root)], capture_output=True)
+
+
+def run_plan(args, old_root):
     rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                          capture_output=True, text=True).stdout.strip()
     import jax
@@ -134,7 +144,8 @@ def main():
 
     print(f"# {cpu_model()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
           f"jax {jax.__version__}, numpy {np.__version__}; new = {rev}, old = "
-          f"{args.old_path or args.old_rev}; load {os.getloadavg()[0]:.1f}")
+          f"{(args.old_path or args.old_rev) if args.old else 'not run'}; "
+          f"load {os.getloadavg()[0]:.1f}")
     tmp = pathlib.Path(tempfile.mkdtemp(prefix="bench-diagnose-"))
     plan = [("new", c, 2) for c in args.new]
     plan += [("old", c.split(":")[0], int(c.split(":")[1]) if ":" in c else 1)
