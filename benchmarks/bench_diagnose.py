@@ -9,7 +9,9 @@ Cases (data simulated once here and given to both versions):
 - ``series5``: the same at 5 exposures W = (0.1, 0.25, 0.5, 0.75, 1) dt, where the
   exposure_kernel candidate (a folded model without closed form) is tried;
 - ``diode<N>``: one photodiode-like recording of N samples, W = 10 ns, 100 kHz, same trap,
-  where detector_filter and hydrodynamics are tried.
+  where detector_filter and hydrodynamics are tried;
+- ``filter<N>``: the same seen through a silicon diode (8 kHz, alpha 0.4): detector_filter is
+  significant and refitted with errors by ``calibrate`` (not in the default plan).
 
 Each (version, case) runs in a fresh Python process (no persistent compilation cache) that
 calls ``diagnose`` twice and reports the wall time of each call and the process's peak
@@ -71,9 +73,14 @@ def simulate_case(name: str, path: pathlib.Path):
               for i, w in enumerate(ws)]
         dts = [DT_CAM] * 5
     else:
-        n = int(name.removeprefix("diode"))
+        from blurtrap.simulate import PhotodiodeFilter
+
+        filt = name.startswith("filter")
+        n = int(name.removeprefix("filter" if filt else "diode"))
+        inj = (PhotodiodeFilter(8e3, 0.4),) if filt else ()
         xs = [np.asarray(bt.simulate(K, GAMMA, 1e-8, 1e-5, n, key=jax.random.key(20),
-                                     method="exact_frames", tracking_std=2e-9))[0]]
+                                     method="exact_frames", tracking_std=2e-9,
+                                     injections=inj))[0]]
         ws, dts = [1e-8], [1e-5]
     np.savez(path, x=np.stack(xs), dt=np.asarray(dts), w=np.asarray(ws))
 
