@@ -13,6 +13,7 @@ from ..inference._ml_fits import screen_model
 from ..inference._result import FitError
 from ._evidence import _evidence, _gof_change, _kurtosis_test, _line_candidate, _plausible
 from ._results import Candidate
+from ._screen import screen
 
 SPECTRAL_CANDIDATES = ("motion_blur", "aliasing", "tracking_noise", "drift", "line_noise",
                        "exposure_kernel", "detector_filter", "hydrodynamics")
@@ -116,11 +117,11 @@ def _screen(recs, mdl, k, name: str, config: dict, warm: dict):
     """Screening refit of ``mdl`` + ``name`` (warm start; core effects also from the
     closed-form start, keeping the better optimum). Returns the model and the optimum."""
     test_model = mdl.add(*COUPLED_GROUPS.get(name, (name,)), **config)
-    params, nll1, gof1, ok = screen_model(recs, test_model, k, start=warm)
+    params, nll1, gof1, ok = screen(recs, test_model, k, start=warm)
     if name in _CORE_FLAGS or name in COUPLED_GROUPS:
         # adding a core effect can move k and gamma far from the misspecified base
         # fit: also try the closed-form start and keep the better optimum
-        cold = screen_model(recs, test_model, k, start=None)
+        cold = screen(recs, test_model, k, start=None)
         if cold[1] < nll1:
             params, nll1, gof1, ok = cold
     return test_model, params, nll1, gof1, ok
