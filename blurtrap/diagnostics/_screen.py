@@ -31,10 +31,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import float64_scope
-from ..inference._calibrate import _spectral_args, _start_vector, screen_model, spectral_gof
 from ..inference._fit import fit_nll_only
+from ..inference._ml_fits import screen_model
 from ..inference._models import TrapModel, get_model
 from ..inference._problems import SpectralArgs, make_layout, spectral_model_psd
+from ..inference._spectral import _spectral_args, spectral_gof
+from ..inference._starts import _start_vector
 
 #: log-spaced nodes per recording at which the folded model is evaluated: the interpolation
 #: error falls like 1/N_NODES^4 (largest relative error measured over the candidates' parameter

@@ -11,9 +11,10 @@ import pytest
 
 import blurtrap as bt
 from blurtrap.diagnostics._screen import node_args, node_nll, node_psd, screen
-from blurtrap.inference._calibrate import _spectral_args, screen_model
+from blurtrap.inference._ml_fits import screen_model
 from blurtrap.inference._models import get_model
 from blurtrap.inference._problems import make_layout, spectral_model_psd, spectral_nll
+from blurtrap.inference._spectral import _spectral_args
 from blurtrap.physics._effects import water_viscosity
 from blurtrap.simulate import PhotodiodeFilter
 
