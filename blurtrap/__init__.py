@@ -54,6 +54,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .inference import Uniform as Uniform
     from .inference import allan_variance as allan_variance
     from .inference import calibrate as calibrate
+    from .inference import calibrate_anharmonic as calibrate_anharmonic
     from .inference import calibrate_batch as calibrate_batch
     from .inference import fit_psd as fit_psd
     from .inference import sample_posterior as sample_posterior
@@ -104,6 +105,7 @@ _LAZY = {
     "Normal": "inference", "Posterior": "inference", "ShortChainWarning": "inference",
     "TrapModel": "inference", "Uniform": "inference", "calibrate": "inference",
     "calibrate_batch": "inference", "fit_psd": "inference", "sample_posterior": "inference",
+    "calibrate_anharmonic": "inference",
     "stokes_gamma_prior": "inference", "stuck_bead_prior": "inference",
     # physics
     "ExponentialKernel": "physics", "ProductKernel": "physics", "RectKernel": "physics",
