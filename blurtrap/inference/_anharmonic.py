@@ -165,6 +165,10 @@ def _check(recording, lags, bandwidth, n_grid, max_iter):
     if not isinstance(recording, Recording):
         raise TypeError("recording must be a blurtrap.Recording (one trace); got "
                         f"{type(recording).__name__}")
+    if recording.position_unit != "m":
+        raise ValueError("calibrate_anharmonic needs positions in metres; got a recording in "
+                         "volts (position_unit = 'V'): convert it with the displacement "
+                         "sensitivity first")
     if recording.n_frames < 512:
         raise ValueError(f"recording has {recording.n_frames} frames; calibrate_anharmonic "
                          "needs >= 512 (the kurtosis of fewer frames cannot resolve k4)")
@@ -180,6 +184,18 @@ def _check(recording, lags, bandwidth, n_grid, max_iter):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int | np.integer)
                               or v < lo):
             raise ValueError(f"{name} must be an integer >= {lo}; got {name} = {v!r}")
+
+
+def _start_values(start):
+    try:
+        k0, g0, e0 = (float(v) for v in start)
+        ok = k0 > 0 and g0 > 0 and e0 >= 0 and all(map(math.isfinite, (k0, g0, e0)))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError("start must be a CalibrationResult or (k [N/m] > 0, gamma [N s/m] > 0, "
+                         f"eps^2 [m^2] >= 0); got start = {start!r}")
+    return k0, g0, e0
 
 
 def _gauss_newton(ghat, winv, model, jac, phi, max_iter, n):
@@ -254,7 +270,7 @@ def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, 
     elif hasattr(start, "k") and hasattr(start, "gamma"):
         k0, g0, e0 = start.k, start.gamma, max(start.tracking_var, 0.0)
     else:
-        k0, g0, e0 = (float(v) for v in start)
+        k0, g0, e0 = _start_values(start)
     tau_frames = g0 / k0 / dt
     lags = _default_lags(tau_frames, recording.n_frames) if lags is None else tuple(
         int(v) for v in lags)
