@@ -46,7 +46,7 @@ from .._constants import BOLTZMANN
 from ._anharmonic_moments import frame_moments
 from ._fit import chi2_sf
 
-BETA_BOUNDS = (-0.5, 20.0)
+BETA_BOUNDS = (-0.08, 20.0)
 _PARAMS = ("k", "k4", "gamma", "tracking_var")
 _LAB = {"k": (1e3, "pN/nm"), "k4": (1e-15, "pN/nm^3"), "gamma": (1e6, "pN s/um"),
         "tracking_var": (1e18, "nm^2")}
