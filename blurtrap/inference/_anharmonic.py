@@ -23,11 +23,17 @@ Jacobians of the exact model moments. Standard errors: ``(G' Omega^-1 G)^-1 / n`
 J statistic ``n Q`` is the goodness of fit (chi^2 with ``p - 4`` dof).
 
 **Exact / approximate.** Exact: the model moments for any exposure (up to the generator grid,
-relative error ~1e-4, far below the statistical error of ~1-10 %). Asymptotic (as in every
-fit here): the normal sampling law of the moments and the HAC estimate of ``Omega`` (Bartlett
-under-covers slightly, ~1-3 % on the SEs at this bandwidth; see benchmarks/RESULTS_anharmonic.md
-for measured coverage). Assumed: a symmetric quartic potential (no cubic term), white Gaussian
-tracking noise, a rectangular exposure, regular frames.
+relative error ~1e-4 for the variance and kurtosis, far below the statistical errors of a few
+per cent). Asymptotic (as in every fit here): the normal sampling law of the moments and the
+HAC estimate of ``Omega`` from the data. Measured (benchmarks/RESULTS_anharmonic.md; 50
+independent camera records of 16 384 frames per beta, W = dt, tau = 4 frames): k and gamma
+unbiased to < 1 % (harmonic fit: k +12 % at beta = 0.05, +22 % at 0.1), within 2 SE in
+92-96 % of records and within 3 SE in all; SD/SE 0.9-1.1 at beta = 0.05 and 0.1, but 1.24
+for k (1.33 for beta) on a harmonic trap (beta = 0: the data-based variance of x^4 is noisy
+for Gaussian tails; a larger HAC bandwidth does not change it). Cost: ~2 s per fit of 16 384
+frames after a ~5 s compilation (one CPU core). Assumed: a symmetric quartic potential (no
+cubic term), white Gaussian tracking noise, a rectangular exposure, regular frames, one
+recording.
 """
 
 from __future__ import annotations
