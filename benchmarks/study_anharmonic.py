@@ -2,6 +2,9 @@
 
 Run:  nice -n 10 python benchmarks/study_anharmonic.py [--seeds 50] [--betas 0,0.05,0.1]
                                                       [--out anharmonic_study.json]
+      nice -n 10 python benchmarks/study_anharmonic.py --photodiode --seeds 20 --betas 0.1
+(``--photodiode``: instantaneous samples, W = 1e-3 dt in the model, dt = tau/16, 65 536
+samples per record, 4 substeps per sample: the W -> 0 path.)
 
 The hidden quartic trap of benchmarks/study_diagnose.py: camera at 1500 fps, W = dt,
 16 384 frames, k = 0.01 pN/nm (tau = 4.0 frames), 1.53 um bead, eps = 2 nm, beta = k4 kT/k^2.
@@ -41,28 +44,29 @@ TEMP = 295.0
 KT = BOLTZMANN * TEMP
 
 
-def quartic_frames(beta, n_traces, seed, n=N, substeps=16, burn=200):
-    """(n_traces, n) camera frames [m] (W = dt) of U = k x^2/2 + k4 x^4/4."""
+def quartic_frames(beta, n_traces, seed, n=N, substeps=16, burn=200, dt=DT, blur=True):
+    """(n_traces, n) frames [m] of U = k x^2/2 + k4 x^4/4: camera (W = dt) or, with
+    ``blur=False``, instantaneous samples at the frame starts (photodiode, W -> 0)."""
     rng = np.random.default_rng(seed)
-    h = DT / (GAMMA / K) / substeps
+    h = dt / (GAMMA / K) / substeps
     c, s = math.exp(-h), math.sqrt(-math.expm1(-2 * h))
     x = rng.standard_normal(n_traces) / math.sqrt(1 + 3 * beta)
     out = np.empty((n + burn, n_traces))
     for i in range(n + burn):
         z = rng.standard_normal((substeps, n_traces))
-        acc = 0.5 * x
+        acc, x0 = 0.5 * x, x
         for j in range(substeps):
             x = x / np.sqrt(1.0 + beta * x * x * h)
             x = c * x + s * z[j]
             x = x / np.sqrt(1.0 + beta * x * x * h)
             acc = acc + (0.5 * x if j == substeps - 1 else x)
-        out[i] = acc / substeps
+        out[i] = acc / substeps if blur else x0
     frames = out[burn:].T * math.sqrt(KT / K)
     return frames + EPS * rng.standard_normal(frames.shape)
 
 
-def fit_one(x):
-    rec = bt.Recording(x, frame_interval=DT, exposure=DT, temperature=TEMP)
+def fit_one(x, dt=DT, exposure=DT):
+    rec = bt.Recording(x, frame_interval=dt, exposure=exposure, temperature=TEMP)
     t0 = time.perf_counter()
     a = bt.calibrate_anharmonic(rec)
     t_a = time.perf_counter() - t0
@@ -124,24 +128,34 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--betas", default="0,0.05,0.1")
     ap.add_argument("--out", default="anharmonic_study.json")
+    ap.add_argument("--photodiode", action="store_true",
+                    help="W -> 0 (1e-3 dt), dt = tau/16, 65 536 samples, 4 substeps each")
     args = ap.parse_args(argv)
     bt.enable_x64()
     betas = [float(b) for b in args.betas.split(",")]
-    result = {"cpu": cpu_model(), "n_frames": N, "seeds": args.seeds, "summaries": [],
+    result = {"cpu": cpu_model(), "photodiode": args.photodiode,
+              "n_frames": 4 * N if args.photodiode else N, "seeds": args.seeds, "summaries": [],
               "rows": {}}
     for ib, beta in enumerate(betas):
         seed = 5000 + 100 * ib
         t0 = time.perf_counter()
-        frames = quartic_frames(beta, args.seeds, seed)
-        print(f"beta = {beta}: simulated {args.seeds} x {N} frames in "
+        if args.photodiode:
+            dt, w = GAMMA / K / 16, GAMMA / K / 16e3
+            frames = quartic_frames(beta, args.seeds, seed, n=4 * N, substeps=4, dt=dt,
+                                    blur=False)
+        else:
+            dt, w = DT, DT
+            frames = quartic_frames(beta, args.seeds, seed)
+        print(f"beta = {beta}: simulated {args.seeds} x {frames.shape[1]} frames in "
               f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
         rows = []
         for i in range(args.seeds):
-            rows.append(fit_one(frames[i]) | {"seed": seed, "trace": i})
+            rows.append(fit_one(frames[i], dt, w) | {"seed": seed, "trace": i})
         result["rows"][str(beta)] = rows
         result["summaries"].append(summarise(rows, beta))
         pathlib.Path(args.out).write_text(json.dumps(result, indent=1, default=float))
-    print(f"CPU: {result['cpu']}; {N} frames per record, {args.seeds} records per beta\n")
+    print(f"CPU: {result['cpu']}; {result['n_frames']} frames per record, {args.seeds} records "
+          f"per beta{' (photodiode)' if args.photodiode else ''}\n")
     print(table(result["summaries"]))
 
 

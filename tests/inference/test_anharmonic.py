@@ -5,6 +5,7 @@ force for h/2, exact Ornstein-Uhlenbeck step, cubic flow for h/2; exposure avera
 trapezoid rule over the substeps), not from blurtrap's simulator or moments.
 """
 
+import json
 import math
 
 import numpy as np
@@ -134,6 +135,7 @@ def test_quartic_camera_recovers_k_gamma_where_harmonic_fails():
     assert abs(h.k - K) > 3 * h.k_err  # the harmonic fit is biased (k ~ 20 % high)
     d = r.to_dict()
     assert d["k"] == r.k and d["param_names"] == ["k", "k4", "gamma", "tracking_var"]
+    assert json.loads(json.dumps(d))["k4_err"] == r.k4_err
     text = r.summary()
     assert "pN/nm^3" in text and "pN s/um" in text and "nm" in text
 
