@@ -58,6 +58,7 @@ if TYPE_CHECKING:  # static tools see every public name as a plain import
     from .inference import XYCalibration as XYCalibration
     from .inference import allan_variance as allan_variance
     from .inference import calibrate as calibrate
+    from .inference import calibrate_anharmonic as calibrate_anharmonic
     from .inference import calibrate_batch as calibrate_batch
     from .inference import calibrate_xy as calibrate_xy
     from .inference import fit_psd as fit_psd
@@ -110,6 +111,7 @@ _LAZY = {
     "Normal": "inference", "Posterior": "inference", "ShortChainWarning": "inference",
     "TrapModel": "inference", "Uniform": "inference", "calibrate": "inference",
     "calibrate_batch": "inference", "fit_psd": "inference", "sample_posterior": "inference",
+    "calibrate_anharmonic": "inference",
     "stokes_gamma_prior": "inference", "stuck_bead_prior": "inference",
     # physics
     "ExponentialKernel": "physics", "ProductKernel": "physics", "RectKernel": "physics",

@@ -5,6 +5,8 @@ from ..effects import AbstractEffect as AbstractEffect
 from ..effects import make_effect as make_effect
 from ._allan import AllanVariance as AllanVariance
 from ._allan import allan_variance as allan_variance
+from ._anharmonic import AnharmonicResult as AnharmonicResult
+from ._anharmonic import calibrate_anharmonic as calibrate_anharmonic
 from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
 from ._calibrate import calibrate as calibrate
