@@ -9,7 +9,6 @@ import math
 import numpy as np
 
 from ..inference._fit import chi2_sf
-from ..inference._ml_fits import screen_model
 from ..inference._result import FitError
 from ._evidence import _evidence, _gof_change, _kurtosis_test, _line_candidate, _plausible
 from ._results import Candidate
@@ -86,7 +85,10 @@ def _anharmonicity_candidate(recs, base) -> Candidate:
     """Tested by the frames' excess kurtosis; ``delta_loglik`` is the score-test ``z^2/2``."""
     z, p = _kurtosis_test(recs, base)
     return Candidate("anharmonicity", 0.5 * z * z, 1, p, z * z - 2.0,
-                     f"frame-histogram excess kurtosis {z:+.2f} standard errors from Gaussian")
+                     f"frame-histogram excess kurtosis {z:+.2f} standard errors from Gaussian; "
+                     "remedy: the Gaussian models cannot absorb a quartic term: refit with "
+                     "bt.calibrate_anharmonic(recording) (k, k4, gamma, eps^2 from exact "
+                     "moments of the blurred frames)")
 
 
 def _timing_candidate(recs) -> Candidate:
@@ -95,7 +97,9 @@ def _timing_candidate(recs) -> Candidate:
     if irregular:
         j = irregular[0].timing_jitter
         ev = (f"time stamps irregular: jitter std {j.std * 1e6:.3g} us, max "
-              f"{j.max_deviation * 1e6:.3g} us ({len(irregular)} recordings)")
+              f"{j.max_deviation * 1e6:.3g} us ({len(irregular)} recordings); remedy: "
+              "calibrate fits the exact likelihood at the recorded frame times (closed-form "
+              "models; see the fit's notes)")
         return Candidate("timing_jitter", None, 0, 0.0, None, ev)
     return Candidate("timing_jitter", None, 0, 1.0, None, "time stamps regular")
 

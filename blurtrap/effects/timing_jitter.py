@@ -14,7 +14,12 @@ class TimingJitter(AbstractEffect):
     deviates from the regular grid by more than ``timing_tolerance`` (default 1e-3 frame
     intervals). Measured (benchmarks/study_diagnose.py, 16 384 frames): jitter std 5 % of dt
     found in 5/5 records, 0.02 % of dt (largest deviation ~0.08 %, below the tolerance) in
-    0/5; i.i.d. jitter is flagged once its std exceeds ~2.5e-4 dt."""
+    0/5; i.i.d. jitter is flagged once its std exceeds ~2.5e-4 dt.
+
+    **Remedy.** ``calibrate`` fits recordings with irregular time stamps by the exact
+    likelihood at the recorded frame times (a Kalman filter of the blurred trap process,
+    ``blurtrap.inference._irregular``; closed-form models), so jitter, a wandering clock or
+    dropped frames do not bias k and gamma (benchmarks/RESULTS_jitter.md)."""
 
     name: ClassVar[str] = "timing_jitter"
     kind: ClassVar[str] = "timestamps"
