@@ -217,6 +217,20 @@ def _read_csv(path: Path, position_unit, pixel_size_m, on_bad_rows):
     return times, positions, stage, excluded, parser.n_lines, unit
 
 
+def file_metadata(path, unit, temperature, metadata):
+    """``(metadata, temperature)`` of a recording read from `path`: the caller's metadata plus
+    the source file, the file's position unit and the default temperature when none was
+    given (recorded under ``defaults_applied``)."""
+    meta = {} if metadata is None else dict(metadata)
+    meta["source"] = str(path)
+    if unit != "m":
+        meta["position_unit"] = unit
+    if temperature is None:
+        temperature = DEFAULT_TEMPERATURE
+        meta["defaults_applied"] = {"temperature_K": DEFAULT_TEMPERATURE}
+    return meta, temperature
+
+
 def infer_frame_interval(times: np.ndarray, tol: float = DEFAULT_TIMING_TOLERANCE) -> float:
     """Frame interval [s] from time stamps: the median step, refined to the least-squares
     slope of ``t`` against frame index when the two agree to ``tol`` (regular stamps)."""
@@ -277,13 +291,7 @@ def load_csv(
         detail = f" ({len(excluded)} bad row(s) excluded)" if excluded else ""
         raise ValueError(f"{path}: no data rows after the header{detail}")
 
-    meta = {} if metadata is None else dict(metadata)
-    meta["source"] = str(path)
-    if unit != "m":
-        meta["position_unit"] = unit
-    if temperature is None:
-        temperature = DEFAULT_TEMPERATURE
-        meta["defaults_applied"] = {"temperature_K": DEFAULT_TEMPERATURE}
+    meta, temperature = file_metadata(path, unit, temperature, metadata)
     if excluded:
         meta["excluded_rows"] = {
             "count": len(excluded),

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .._constants import DEFAULT_TEMPERATURE
-from ._csv import _line_blocks, infer_frame_interval
+from ._csv import _line_blocks, file_metadata, infer_frame_interval
 from ._csv_rows import TIME_COLUMN, _RowParser, _short
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
 from ._units import ALLOWED_UNITS, canonical_unit, check_pixel_size, decimal_exponent, parse_number
@@ -241,13 +241,7 @@ def load_xy_csv(path, *, exposure, frame_interval=None, temperature=None, positi
     times, xs, ys, unit = _read_xy(path, position_unit, pixel_size_m)
     if xs.shape[0] == 0:
         raise ValueError(f"{path}: no data rows after the header")
-    meta = {} if metadata is None else dict(metadata)
-    meta["source"] = str(path)
-    if unit != "m":
-        meta["position_unit"] = unit
-    if temperature is None:
-        temperature = DEFAULT_TEMPERATURE
-        meta["defaults_applied"] = {"temperature_K": DEFAULT_TEMPERATURE}
+    meta, temperature = file_metadata(path, unit, temperature, metadata)
     try:
         if frame_interval is None:
             if times is None or times.shape[0] < 2:
