@@ -37,8 +37,9 @@ def one(kind, size, n, seed, w_frac):
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rec_t = bt.Recording(x, frame_interval=dt, exposure=w_frac * dt, temperature=T,
-                             times=t, allow_irregular=True)
+        # the nominal interval a user would declare: the median step of the stamps
+        rec_t = bt.Recording(x, frame_interval=float(np.median(np.diff(t))),
+                             exposure=w_frac * dt, temperature=T, times=t, allow_irregular=True)
         rec_r = bt.Recording(x, frame_interval=float(np.mean(np.diff(t))),
                              exposure=w_frac * dt, temperature=T)
         for name, rec in (("times", rec_t), ("regular", rec_r)):

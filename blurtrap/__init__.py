@@ -138,7 +138,7 @@ _LAZY = {
     "XYCalibration": "inference", "calibrate_xy": "inference", "simulate_xy": "simulate",
 }
 # subpackages that ``import blurtrap`` used to make available as attributes
-_SUBMODULES = ("_config", "data", "diagnostics", "inference", "physics")
+_SUBMODULES = ("_config", "data", "diagnostics", "effects", "inference", "physics")
 
 # derived from _LAZY rather than written out a third time; the TYPE_CHECKING imports above
 # declare the same names to static tools
