@@ -148,10 +148,15 @@ def diagnose_command(args) -> int:
     """``blurtrap diagnose``: diagnose, print the verdict and fit (or JSON), write the report."""
     from pathlib import Path
 
+    from .data import holds_xy
     from .diagnostics import diagnose
 
     path = Path(args.manifest)
     _check_input_path(path)
+    if holds_xy(path):
+        raise CliError(f"{path}: diagnose does not take x/y recordings yet; use blurtrap "
+                       "calibrate (principal axes, shared gamma), or in Python diagnose the "
+                       "traces along the principal axes (XYRecording.project(result.phi))")
     report = _report_dir(args)
     d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
     if report is not None:

@@ -90,3 +90,8 @@ def test_bare_xy_csv_is_refused_with_the_reason(xy, tmp_path, capsys):
     write_xy_csv(xy, tmp_path / "xy.csv")
     assert main(["calibrate", str(tmp_path / "xy.csv")]) != 0
     assert "does not say its frame interval, exposure" in capsys.readouterr().err
+
+
+def test_diagnose_refuses_xy_with_the_reason(manifest, capsys):
+    assert main(["diagnose", str(manifest)]) != 0
+    assert "diagnose does not take x/y recordings yet" in capsys.readouterr().err
