@@ -95,3 +95,13 @@ def test_bare_xy_csv_is_refused_with_the_reason(xy, tmp_path, capsys):
 def test_diagnose_refuses_xy_with_the_reason(manifest, capsys):
     assert main(["diagnose", str(manifest)]) != 0
     assert "diagnose does not take x/y recordings yet" in capsys.readouterr().err
+
+
+def test_several_entries_each_get_a_table(xy, tmp_path, capsys):
+    two = [bt.xy_from_arrays(xy.x.positions, xy.y.positions, frame_interval=DT, exposure=W,
+                             name=n) for n in ("left", "right")]
+    save_manifest(two, tmp_path / "two.json")
+    assert main(["calibrate", str(tmp_path / "two.json")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("x/y calibration") == 2
+    assert out.index("left:") < out.index("right:")
