@@ -27,10 +27,14 @@ def calibrate_command(args) -> int:
     """``blurtrap calibrate``: fit, print the table (or JSON), write the report."""
     from pathlib import Path
 
+    from .data import holds_xy
     from .inference import calibrate
 
     path = Path(args.manifest)
     _check_input_path(path)
+    xy = holds_xy(path)
+    if xy:
+        _refuse_for_xy(args)
     report = _report_dir(args)
     kw = dict(method=args.method, model=args.model, likelihood=args.likelihood)
     if args.k_mode is not None:
@@ -51,6 +55,8 @@ def calibrate_command(args) -> int:
             raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
                            f"be > 0 and plausible (<= 1e4); got {args.diffusion:g}")
         kw["diffusion"] = args.diffusion * 1e-12
+    if xy:
+        return _calibrate_xy(path, kw, args.json)
     result = calibrate(str(path), **kw)
     post = None
     if args.posterior:
@@ -75,6 +81,45 @@ def calibrate_command(args) -> int:
         if post is not None:
             print(post.summary())
     return _report_done(report, args.json)
+
+
+def _refuse_for_xy(args) -> None:
+    """The calibrate options an x/y manifest cannot take, refused before any fit."""
+    for flag, given in (("--report", args.report is not None), ("--posterior", args.posterior)):
+        if given:
+            raise CliError(f"{args.manifest}: {flag} is not available for x/y recordings yet; "
+                           "run without it, or use Python (bt.calibrate_xy(xy); its .joint is "
+                           "the CalibrationResult of the two principal axes)")
+    if args.k_mode is not None:
+        raise CliError(f"{args.manifest}: --k-mode cannot be used with x/y recordings: k is "
+                       "fitted once per principal axis, with one shared gamma")
+
+
+def _calibrate_xy(path, kw: dict, as_json: bool) -> int:
+    """x/y recordings: principal axes, k per axis, one shared gamma (``calibrate_xy``) for
+    each entry; the summaries, or one JSON object (``{"xy": [...]}`` for several)."""
+    from .data import load
+    from .inference import calibrate_xy
+
+    loaded = load(path)
+    items = loaded if isinstance(loaded, list) else [loaded]
+    results = []
+    for i, xy in enumerate(items):
+        try:
+            results.append(calibrate_xy(xy, **kw))
+        except Exception as e:
+            if len(items) == 1:
+                raise
+            raise CliError(f"{xy.name or f'recordings[{i}]'}: {e}") from e
+    if as_json:
+        dicts = [{"name": xy.name} | r.to_dict() for xy, r in zip(items, results, strict=True)]
+        print(dumps_json(dicts[0] if len(dicts) == 1 else {"xy": dicts}))
+        return 0
+    for xy, r in zip(items, results, strict=True):
+        if len(items) > 1:
+            print(f"{xy.name}:")
+        print(r.summary())
+    return 0
 
 
 def _fixed_arg(items) -> dict:
@@ -103,10 +148,15 @@ def diagnose_command(args) -> int:
     """``blurtrap diagnose``: diagnose, print the verdict and fit (or JSON), write the report."""
     from pathlib import Path
 
+    from .data import holds_xy
     from .diagnostics import diagnose
 
     path = Path(args.manifest)
     _check_input_path(path)
+    if holds_xy(path):
+        raise CliError(f"{path}: diagnose does not take x/y recordings yet; use blurtrap "
+                       "calibrate (principal axes, shared gamma), or in Python diagnose the "
+                       "traces along the principal axes (XYRecording.project(result.phi))")
     report = _report_dir(args)
     d = diagnose(str(path), model=args.model, add=tuple(args.add), alpha=args.alpha)
     if report is not None:

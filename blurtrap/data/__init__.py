@@ -16,6 +16,7 @@ from ._h5 import load_h5 as load_h5
 from ._instrument import INSTRUMENT_KEYS as INSTRUMENT_KEYS
 from ._instrument import instrument_settings as instrument_settings
 from ._io import from_arrays as from_arrays
+from ._io import holds_xy as holds_xy
 from ._io import load as load
 from ._manifest import load_manifest as load_manifest
 from ._manifest import save_manifest as save_manifest

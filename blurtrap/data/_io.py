@@ -153,11 +153,13 @@ _LOADERS = {
 }
 
 
-def load(path, **kwargs) -> Recording | RecordingSet:
+def load(path, **kwargs):
     """Load recordings from ``path`` by extension (keywords are passed on):
 
-    - ``.json`` -> :func:`load_manifest` (RecordingSet), ``.npz`` -> :func:`load_npz`,
-      ``.csv`` -> :func:`load_csv`;
+    - ``.json`` -> :func:`load_manifest` (RecordingSet, or a list of XYRecording for a
+      manifest of x/y recordings), ``.npz`` -> :func:`load_npz`, ``.csv`` ->
+      :func:`load_csv`, or :func:`load_xy_csv` (XYRecording) when the header has a
+      ``y_<unit>`` column right after the ``x_<unit>`` column;
     - ``.h5`` / ``.hdf5`` -> :func:`load_bluelake` when ``channel=`` is given or the file looks
       like a Bluelake export (a ``Bluelake version`` root attribute or a ``Force HF`` group),
       else :func:`load_h5`, which needs ``dataset=`` (the error lists the datasets);
@@ -182,6 +184,10 @@ def load(path, **kwargs) -> Recording | RecordingSet:
 
         return load_npz(p, **kwargs)
     if kind == "csv":
+        from ._xy import is_xy_csv, load_xy_csv
+
+        if is_xy_csv(p):
+            return load_xy_csv(p, **kwargs)
         from ._csv import load_csv
 
         return load_csv(p, **kwargs)
@@ -192,3 +198,27 @@ def load(path, **kwargs) -> Recording | RecordingSet:
     from ._tdms import load_tdms
 
     return load_tdms(p, **kwargs)
+
+
+def holds_xy(path) -> bool:
+    """True when ``path`` is an x/y CSV (header ``[t_s,]x_<unit>,y_<unit>``) or a manifest
+    whose entries are x/y recordings (``"axes": "xy"``, or no ``axes`` and an x/y CSV), read
+    from the headers only. A file the loaders would refuse gives False: loading it reports
+    the problem."""
+    import json
+
+    from ._xy import is_xy_csv
+
+    p = Path(os.fspath(path))
+    suffix = p.suffix.lower()
+    if suffix == ".csv":
+        return is_xy_csv(p)
+    if suffix != ".json":
+        return False
+    try:
+        entries = json.loads(p.read_text(encoding="utf-8-sig"))["recordings"]
+        entry = entries[0]
+        axes = entry.get("axes")
+        return axes == "xy" or (axes is None and is_xy_csv(p.parent / entry["file"]))
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError):
+        return False

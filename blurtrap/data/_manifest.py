@@ -28,6 +28,7 @@ from ._instrument import INSTRUMENT_KEYS, check_instrument
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
 from ._recording_set import RecordingSet
 from ._units import canonical_unit, check_pixel_size, decimal_text
+from ._xy import XYRecording, is_xy_csv, load_xy_csv, write_xy_csv
 
 _TOP_KEYS = (
     "position_unit",
@@ -48,8 +49,10 @@ _ENTRY_KEYS = (
     "allow_irregular",
     "timing_tolerance",
     "check_units",
+    "axes",
     *INSTRUMENT_KEYS,
 )
+_AXES = ("x", "xy")
 # metadata keys that the loaders set themselves; not written back by save_manifest
 _LOADER_KEYS = ("source", "excluded_rows", "defaults_applied", "position_unit")
 
@@ -92,15 +95,43 @@ def _number(where: str, key: str, value, scale_exp: int = 0) -> float:
     return float(Decimal(value).scaleb(-scale_exp))
 
 
-def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
-    """Load a manifest JSON and its CSV files into a :class:`RecordingSet`.
+def _entry_axes(where: str, e: dict, csv_path: Path) -> str:
+    """``"x"`` or ``"xy"``: the entry's ``axes`` key, checked against the CSV's header, or
+    (no key) what the header says."""
+    has_y = is_xy_csv(csv_path)
+    if "axes" not in e:
+        return "xy" if has_y else "x"
+    axes = e["axes"]
+    if not isinstance(axes, str) or axes not in _AXES:
+        raise ValueError(f"{where}: 'axes' must be one of {list(_AXES)} (\"x\": one trace, "
+                         f"\"xy\": an x/y recording); got {_plain(axes)!r:.60}")
+    if axes == "x" and has_y:
+        raise ValueError(f"{where}: 'axes' is \"x\" but the CSV's header has a y column; "
+                         f"use \"axes\": \"xy\" (or leave 'axes' out) for an x/y recording")
+    return axes
+
+
+def _check_kinds(path: Path, recs: list) -> None:
+    """A manifest holds one kind: single traces or x/y recordings."""
+    xy = [i for i, r in enumerate(recs) if isinstance(r, XYRecording)]
+    if xy and len(xy) != len(recs):
+        one = next(i for i, r in enumerate(recs) if not isinstance(r, XYRecording))
+        raise ValueError(f"{path}: recordings[{xy[0]}] is an x/y recording but recordings[{one}] "
+                         f"is a single trace; a manifest holds one kind (write two manifests)")
+
+
+def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet | list[XYRecording]:
+    """Load a manifest JSON and its CSV files into a :class:`RecordingSet`, or, when its
+    entries are x/y recordings, a list of :class:`XYRecording` (one per entry).
 
     Entry keys: ``file`` and ``exposure_s`` (required), ``frame_interval_s`` (else inferred
     from the CSV time stamps), ``temperature_K`` (else 295 K, noted in
     ``metadata["defaults_applied"]``), ``laser_power_mW``, ``name`` (default: file stem),
     ``metadata``, ``allow_irregular`` (keep irregular time stamps; their jitter is reported
-    in ``timing_jitter``), ``timing_tolerance``, ``check_units``, and the instrument keys
-    (below). Top level: ``position_unit`` (required; ``"V"`` for a detector signal in volts),
+    in ``timing_jitter``), ``timing_tolerance``, ``check_units``, ``axes`` (``"x"``: one
+    trace; ``"xy"``: an x/y recording, CSV header ``t_s,x_<unit>,y_<unit>``; default: the
+    CSV's header decides; one manifest holds one kind), and the instrument keys (below).
+    Top level: ``position_unit`` (required; ``"V"`` for a detector signal in volts),
     ``pixel_size_m`` (for ``px`` only), ``recordings``, ``description`` (a string),
     ``allow_irregular`` and the instrument keys (defaults for the entries that do not set
     them; an entry's ``null`` removes a default). Unknown keys are errors (so ``exposure_ms``
@@ -233,8 +264,10 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         kw["timing_tolerance"] = _number(
             where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))
         )
+        axes = _entry_axes(where, e, csv_path)
+        loader = load_xy_csv if axes == "xy" else load_csv
         try:
-            rec = load_csv(
+            rec = loader(
                 csv_path,
                 position_unit=unit,
                 pixel_size_m=px,
@@ -249,12 +282,13 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet:
         check_instrument(
             instrument,
             where_i,
-            has_stage=rec.stage is not None,
+            has_stage=getattr(rec, "stage", None) is not None,
             nyquist=0.5 / rec.frame_interval,
             check_units=units_checked,
         )
         recs.append(rec)
-    return RecordingSet(recs)
+    _check_kinds(path, recs)
+    return recs if isinstance(recs[0], XYRecording) else RecordingSet(recs)
 
 
 def _safe_stem(name: str | None, i: int) -> str:
@@ -264,8 +298,25 @@ def _safe_stem(name: str | None, i: int) -> str:
     return stem
 
 
+def _items(recordings) -> list:
+    """Recording / XYRecording / RecordingSet / a sequence of either kind -> a list."""
+    if isinstance(recordings, (Recording, XYRecording)):
+        return [recordings]
+    if isinstance(recordings, RecordingSet):
+        return list(recordings)
+    items = list(recordings)
+    if any(isinstance(r, XYRecording) for r in items):
+        for i, r in enumerate(items):
+            if not isinstance(r, XYRecording):
+                raise TypeError(f"save_manifest: item {i} is a {type(r).__name__} among x/y "
+                                f"recordings; a manifest holds one kind (XYRecording or "
+                                f"Recording): save them in two manifests")
+        return items
+    return list(RecordingSet(items))
+
+
 def save_manifest(
-    recordings: Recording | RecordingSet,
+    recordings,
     path,
     position_unit: str | None = None,
     *,
@@ -276,7 +327,9 @@ def save_manifest(
     `position_unit`: the unit of the CSV files' positions; None (default): ``"V"`` for
     recordings in volts, else ``"nm"`` (a manifest has one unit: volts and metres cannot be
     mixed). The instrument keys of the metadata are written as entry keys and a recording's
-    stage as a ``stage_nm`` column.
+    stage as a ``stage_nm`` column. `recordings` may also be an :class:`XYRecording` or a
+    list of them: each is written as ``t_s,x_<unit>,y_<unit>`` with ``"axes": "xy"`` (a
+    length unit or V; not px).
 
     CSV names come from the recording names (made file-system safe and unique), else
     ``recording_000.csv``, ... Positions are written as exact decimals in `position_unit`
@@ -285,10 +338,7 @@ def save_manifest(
 
     **Returns:** the paths written (manifest first).
     """
-    if isinstance(recordings, Recording):
-        recordings = RecordingSet([recordings])
-    if not isinstance(recordings, RecordingSet):
-        recordings = RecordingSet(recordings)
+    recordings = _items(recordings)
     in_volts = {r.position_unit == "V" for r in recordings}
     if len(in_volts) > 1:
         raise ValueError(
@@ -317,7 +367,16 @@ def save_manifest(
         while fname.lower() in used or (folder / fname).resolve() == path.resolve():
             fname, k = f"{stem}_{k}.csv", k + 1
         used.add(fname.lower())
-        write_csv(r, folder / fname, unit, px)
+        xy = isinstance(r, XYRecording)
+        if xy:
+            if unit == "px":
+                raise ValueError("save_manifest: x/y recordings are written in a length unit "
+                                 "or V; position_unit = 'px' is not supported for them")
+            write_xy_csv(r, folder / fname, unit)
+            name, r = r.name, r.x  # the acquisition settings are shared by both axes
+        else:
+            write_csv(r, folder / fname, unit, px)
+            name = r.name
         written.append(folder / fname)
         entry: dict = {
             "file": fname,
@@ -330,7 +389,9 @@ def save_manifest(
             decimals[token] = decimal_text(Decimal(repr(r.laser_power)).scaleb(3))
             entry["laser_power_mW"] = token
         # always written: a missing name would come back as the file stem (null stays None)
-        entry["name"] = r.name
+        entry["name"] = name
+        if xy:
+            entry["axes"] = "xy"
         plain = thaw(r.metadata)
         assert isinstance(plain, dict)  # thaw maps a mapping to a dict
         for k in INSTRUMENT_KEYS:

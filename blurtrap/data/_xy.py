@@ -196,7 +196,20 @@ def _parse_xy_header(path: Path, header: str, position_unit, pixel_size_m):
     return has_time, xcol, ycol, unit, px
 
 
-def _read_xy(path: Path, position_unit, pixel_size_m):
+def is_xy_csv(path) -> bool:
+    """True when the CSV's header names a ``y_<unit>`` column right after its ``x_<unit>``
+    column (an x/y recording); False for any other header or an unreadable file (the loader
+    then reports the problem)."""
+    try:
+        with open(os.fspath(path), encoding="utf-8-sig", errors="replace") as f:
+            header = f.readline()
+    except (OSError, ValueError):
+        return False
+    cols = [c.strip().lower() for c in header.split(",")]
+    return any(a.startswith("x_") and b.startswith("y_") for a, b in zip(cols, cols[1:]))
+
+
+def _read_xy(path: Path, position_unit, pixel_size_m, on_bad_rows="error"):
     blocks = _line_blocks(path)
     first = next(blocks, None)
     if first is None:
@@ -206,42 +219,51 @@ def _read_xy(path: Path, position_unit, pixel_size_m):
     has_time, xcol, ycol, unit, px = _parse_xy_header(
         path, first[:cut].decode("utf-8"), position_unit, pixel_size_m)
     # the y column is read as the parser's optional third column, with the x column's scale
-    parser = _RowParser(path, has_time, xcol, unit, "error", (ycol, unit))
+    parser = _RowParser(path, has_time, xcol, unit, on_bad_rows, (ycol, unit))
     if cut + 1 < len(first):
         parser.feed(first[cut + 1:])
     del first
     for block in blocks:
         parser.feed(block)
-    times, xs, _ = parser.result()
+    times, xs, excluded = parser.result()
     ys = parser.stage_values
     assert ys is not None
     if decimal_exponent(unit) is None:
         assert px is not None
         xs, ys = xs * px, ys * px
-    return times, xs, ys, unit
+    return times, xs, ys, unit, excluded
 
 
 def load_xy_csv(path, *, exposure, frame_interval=None, temperature=None, position_unit=None,
                 pixel_size_m=None, name: str | None = None, metadata=None,
                 timing_tolerance: float = DEFAULT_TIMING_TOLERANCE,
-                check_units: bool = True) -> XYRecording:
+                check_units: bool = True, laser_power=None, allow_irregular: bool = False,
+                on_bad_rows: str = "error") -> XYRecording:
     """Load an x/y recording from a CSV file with header ``t_s,x_<unit>,y_<unit>`` (or
     ``x_<unit>,y_<unit>``), e.g. ``t_s,x_nm,y_nm``, ``t_s,x_px,y_px`` (needs `pixel_size_m`
     [m]) or ``t_s,x_V,y_V`` (kept in volts).
 
     **Arguments:** `exposure` [s]; `frame_interval` [s] (inferred from ``t_s`` when None);
     `temperature` [K] (None: 295 K, noted in ``metadata["defaults_applied"]``);
-    `position_unit` (the unit the file must be in); the rest as in :func:`load_csv`.
+    `position_unit` (the unit the file must be in); `on_bad_rows` (``"error"`` or
+    ``"exclude"``: a bad row is dropped from both axes and reported in
+    ``metadata["excluded_rows"]``); the rest as in :func:`load_csv`.
 
     **Raises:** ``ValueError`` starting with the file name (and line number for a bad row):
     a missing y column, different x and y units, a row with a missing cell, NaN, or
     non-increasing time stamps.
     """
     path = Path(os.fspath(path))
-    times, xs, ys, unit = _read_xy(path, position_unit, pixel_size_m)
+    if on_bad_rows not in ("error", "exclude"):
+        raise ValueError(f"on_bad_rows must be one of ('error', 'exclude'); got {on_bad_rows!r}")
+    times, xs, ys, unit, excluded = _read_xy(path, position_unit, pixel_size_m, on_bad_rows)
     if xs.shape[0] == 0:
-        raise ValueError(f"{path}: no data rows after the header")
+        detail = f" ({len(excluded)} bad row(s) excluded)" if excluded else ""
+        raise ValueError(f"{path}: no data rows after the header{detail}")
     meta, temperature = file_metadata(path, unit, temperature, metadata)
+    if excluded:
+        meta["excluded_rows"] = {"count": len(excluded), "lines": [ln for ln, _ in excluded],
+                                 "reasons": [why for _, why in excluded]}
     try:
         if frame_interval is None:
             if times is None or times.shape[0] < 2:
@@ -255,7 +277,8 @@ def load_xy_csv(path, *, exposure, frame_interval=None, temperature=None, positi
                 frame_interval = w
         return xy_from_arrays(xs, ys, frame_interval=frame_interval, exposure=exposure,
                               temperature=temperature, times=times, name=name, metadata=meta,
-                              timing_tolerance=timing_tolerance, check_units=check_units)
+                              timing_tolerance=timing_tolerance, check_units=check_units,
+                              laser_power=laser_power, allow_irregular=allow_irregular)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
 

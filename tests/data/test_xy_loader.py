@@ -105,3 +105,128 @@ def test_project_and_rotate_against_rotation_matrix():
     assert u.metadata["axis_angle_rad"] == ang and u.name == "bead:axis1"
     with pytest.raises(AttributeError):
         xy.x = None
+
+
+# --- bt.load routing and manifests --------------------------------------------------------
+
+
+def test_load_routes_by_header(tmp_path):
+    import blurtrap as bt
+    from blurtrap.data import holds_xy
+    from blurtrap.data._csv import write_csv
+
+    x, y = _arrays()
+    xy = xy_from_arrays(x, y, frame_interval=DT, exposure=W)
+    write_xy_csv(xy, tmp_path / "xy.csv")
+    got = bt.load(tmp_path / "xy.csv", exposure=W)
+    assert isinstance(got, XYRecording)
+    np.testing.assert_allclose(got.positions, xy.positions, rtol=1e-14)
+    write_csv(xy.x, tmp_path / "x.csv")  # one column: still a single trace
+    one = bt.load(tmp_path / "x.csv", exposure=W)
+    assert not isinstance(one, XYRecording) and one.n_frames == 200
+    assert holds_xy(tmp_path / "xy.csv") and not holds_xy(tmp_path / "x.csv")
+    # an x column followed by something else than y_ is not routed (load_csv names it)
+    p = _write(tmp_path / "z.csv", "t_s,x_nm,z_nm", ["0,1,2", "0.0005,2,3"])
+    with pytest.raises(ValueError, match=r"z\.csv, line 1: header"):
+        bt.load(p, exposure=W)
+
+
+def _xy_set(n=2):
+    out = []
+    for i in range(n):
+        x, y = _arrays(seed=i)
+        out.append(xy_from_arrays(x, y, frame_interval=DT, exposure=W * (i + 1) / 2,
+                                  temperature=290.0 + i, name=f"bead{i}",
+                                  laser_power=0.05 * (i + 1)))
+    return out
+
+
+def test_manifest_round_trip(tmp_path):
+    import json
+
+    import blurtrap as bt
+    from blurtrap.data import holds_xy, load_manifest, save_manifest
+
+    items = _xy_set()
+    written = save_manifest(items, tmp_path / "m.json")
+    doc = json.loads(written[0].read_text())
+    assert [e["axes"] for e in doc["recordings"]] == ["xy", "xy"]
+    assert written[1].read_text().startswith("t_s,x_nm,y_nm\n")
+    back = load_manifest(tmp_path / "m.json")
+    assert isinstance(back, list) and len(back) == 2 and holds_xy(tmp_path / "m.json")
+    for a, b in zip(items, back, strict=True):
+        assert isinstance(b, XYRecording) and b.name == a.name
+        np.testing.assert_allclose(b.positions, a.positions, rtol=1e-14)
+        assert (b.frame_interval, b.exposure, b.temperature) == (
+            a.frame_interval, a.exposure, a.temperature)
+        assert b.x.laser_power == a.x.laser_power and b.y.laser_power == a.x.laser_power
+    # without the 'axes' key the CSV's header decides; bt.load goes through the manifest
+    for e in doc["recordings"]:
+        del e["axes"]
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    again = bt.load(tmp_path / "m.json")
+    np.testing.assert_array_equal(again[1].positions, back[1].positions)
+    # a single XYRecording and volts
+    x, y = _arrays()
+    v = xy_from_arrays(x * 1e7, y * 1e7, frame_interval=DT, exposure=W, position_unit="V",
+                       name="v")
+    save_manifest(v, tmp_path / "v.json")
+    (vb,) = load_manifest(tmp_path / "v.json")
+    assert vb.position_unit == "V"
+    np.testing.assert_allclose(vb.positions, v.positions, rtol=1e-14)
+
+
+def _manifest(tmp_path, entry_extra, header="t_s,x_nm,y_nm", top=None):
+    import json
+
+    rows = [f"{i * DT!r},{i % 3 + 1},{i % 4 + 1}" for i in range(20)]
+    _write(tmp_path / "a.csv", header, rows)
+    entry = {"file": "a.csv", "exposure_s": W, **entry_extra}
+    doc = {"position_unit": "nm", "recordings": [entry], **(top or {})}
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    return tmp_path / "m.json"
+
+
+@pytest.mark.parametrize("axes, header, message", [
+    ("z", "t_s,x_nm,y_nm", r"recordings\[0\] \(a\.csv\): 'axes' must be one of \['x', 'xy'\].*"
+                           r"got 'z'"),
+    (2, "t_s,x_nm,y_nm", r"'axes' must be one of .*got 2"),
+    ("x", "t_s,x_nm,y_nm", r"'axes' is \"x\" but the CSV's header has a y column"),
+    ("xy", "t_s,x_nm", r"recordings\[0\]: .*a\.csv, line 1: .*has no y column"),
+])
+def test_bad_axes_entries(tmp_path, axes, header, message):
+    from blurtrap.data import load_manifest
+
+    with pytest.raises(ValueError, match=message):
+        load_manifest(_manifest(tmp_path, {"axes": axes}, header))
+
+
+def test_xy_entry_errors_name_the_entry(tmp_path):
+    import json
+
+    from blurtrap.data import load_manifest, save_manifest
+
+    # a drive needs a stage column, which an x/y CSV does not have
+    with pytest.raises(ValueError, match=r"recordings\[0\].*drive.*stage"):
+        load_manifest(_manifest(tmp_path, {"drive": {"frequency_Hz": 32.0}}))
+    # a bad row: the manifest, the file and the line
+    p = _manifest(tmp_path, {})
+    (tmp_path / "a.csv").write_text("t_s,x_nm,y_nm\n0,1,2\n0.0005,2\n")
+    with pytest.raises(ValueError, match=r"m\.json, recordings\[0\]: .*a\.csv, line 3"):
+        load_manifest(p)
+    (tmp_path / "a.csv").write_text("t_s,x_nm,y_nm\n0,1,2\n0.0005,2\n0.001,3,4\n")
+    (kept,) = load_manifest(p, on_bad_rows="exclude")  # dropped from both axes, reported
+    np.testing.assert_allclose(kept.positions, [[1e-9, 2e-9], [3e-9, 4e-9]], rtol=1e-15)
+    assert list(kept.metadata["excluded_rows"]["lines"]) == [3]
+    # one manifest, one kind
+    one = xy_from_arrays(*_arrays(), frame_interval=DT, exposure=W, name="xy")
+    save_manifest([one], tmp_path / "k.json")
+    doc = json.loads((tmp_path / "k.json").read_text())
+    _write(tmp_path / "single.csv", "t_s,x_nm", [f"{i * DT!r},{i % 3}" for i in range(20)])
+    doc["recordings"].append({"file": "single.csv", "exposure_s": W})
+    (tmp_path / "k.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"recordings\[0\] is an x/y recording but "
+                                         r"recordings\[1\] is a single trace"):
+        load_manifest(tmp_path / "k.json")
+    with pytest.raises(TypeError, match="item 1 is a Recording among x/y recordings"):
+        save_manifest([one, one.x], tmp_path / "mixed.json")
