@@ -41,6 +41,12 @@ def as_recordings(data: Any) -> list:
             ) from None
     if not recs:
         raise ValueError("data holds no recordings")
+    xy = [i for i, r in enumerate(recs) if type(r).__name__ == "XYRecording"]
+    if xy:
+        raise TypeError(
+            f"data holds x/y recordings (item(s) {xy}): calibrate fits one axis; use "
+            "blurtrap.calibrate_xy(recording) (principal axes, k1, k2, a shared gamma), or "
+            "calibrate one axis, e.g. calibrate(xy.x)")
     for i, r in enumerate(recs):
         if not (hasattr(r, "positions") and hasattr(r, "frame_interval")):
             hint = (" (a bare array: its frame interval and exposure are unknown; wrap arrays "

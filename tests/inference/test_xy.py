@@ -113,3 +113,12 @@ def test_bad_input():
         bt.calibrate_xy(rec)
     with pytest.raises(ValueError, match="k = 'shared' cannot be set"):
         bt.calibrate_xy(_xy(0, n=256), k="shared")
+
+
+def test_calibrate_points_xy_recordings_to_calibrate_xy():
+    rng = np.random.default_rng(0)
+    xy = bt.xy_from_arrays(rng.normal(size=256) * 1e-8, rng.normal(size=256) * 1e-8,
+                           frame_interval=1e-3, exposure=1e-3)
+    for data in (xy, [xy]):
+        with pytest.raises(TypeError, match="calibrate_xy"):
+            bt.calibrate(data)
