@@ -147,7 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrate", help="calibrate k, gamma, D, eps^2 from a manifest (or NPZ/CSV)",
         description="Calibrate the recordings named by MANIFEST and print k, gamma, D and "
         "eps^2 with standard errors in lab units (or --json: the result in SI units).")
-    c.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz); x/y entries (t_s,x_nm,y_nm CSVs) run calibrate_xy")
+    c.add_argument("manifest", metavar="MANIFEST",
+                   help="manifest JSON (or .npz); x/y entries (t_s,x_nm,y_nm CSVs) run "
+                   "calibrate_xy")
     c.add_argument("--method", choices=_METHODS, default="auto",
                    help="estimator (default auto: the most informative the data allow)")
     c.add_argument("--model", type=_model_arg, default=None,
