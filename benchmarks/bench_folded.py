@@ -102,7 +102,8 @@ def main():
     ap.add_argument("--old-rev", default="main", help="git revision of the old code")
     ap.add_argument("--old-path", default=None, help="an existing checkout of the old code")
     ap.add_argument("--new", nargs="*", default=["131072:2", "1048576:2"], help="N:CALLS")
-    ap.add_argument("--old", nargs="*", default=["131072:2", "1048576:1"], help="N:CALLS")
+    ap.add_argument("--old", nargs="*", default=["131072:2"],
+                    help="N:CALLS (the old code at 2^20 needs ~8x its 2^17 memory, ~23 GiB)")
     ap.add_argument("--timeout", type=float, default=1800.0)
     ap.add_argument("--out", default=None, help="append JSON lines here")
     args = ap.parse_args()
