@@ -17,9 +17,15 @@ The model predicts
   models only);
 - ``psd``: the two-sided discrete PSD, for Whittle / blocked fits (all effects);
 - ``variance``: the frame variance C(0).
+
+Folded models (no closed form) evaluate the folded part of a long record's PSD on
+log-spaced nodes and interpolate it (:mod:`._nodes`; ``fold_nodes=0`` for the exact sum).
 """
 
 from __future__ import annotations
+
+import dataclasses
+from functools import partial
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -30,6 +36,7 @@ from ..physics._blur import _blur_factor, _rho_b
 from ..physics._constants import BOLTZMANN
 from ..physics._effects import fold_sum, water_viscosity
 from ..physics._spectra import _expected_block_periodogram, _psd_coeffs
+from ._nodes import N_NODES, folded_on_nodes, use_nodes
 
 _FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
@@ -44,6 +51,9 @@ class TrapModel(eqx.Module):
     name: str = eqx.field(static=True, default="standard")
     extra: tuple = eqx.field(static=True, default=())
     n_alias: int = eqx.field(static=True, default=8)
+    #: log-spaced nodes for the folded spectrum of long records (:mod:`._nodes`); 0: exact
+    #: folded sum at every ordinate
+    fold_nodes: int = eqx.field(static=True, default=N_NODES)
 
     # ---- composition -----------------------------------------------------------------
     def add(self, *effects, **config) -> TrapModel:
@@ -52,11 +62,10 @@ class TrapModel(eqx.Module):
         for e in effects:
             name = e.name if isinstance(e, AbstractEffect) else e
             if name in _FLAGS:
-                model = TrapModel(blur=model.blur or name == "motion_blur",
-                                  alias=model.alias or name == "aliasing",
-                                  noise=model.noise or name == "tracking_noise",
-                                  name=f"{model.name}+{name}", extra=model.extra,
-                                  n_alias=model.n_alias)
+                model = dataclasses.replace(model, blur=model.blur or name == "motion_blur",
+                                            alias=model.alias or name == "aliasing",
+                                            noise=model.noise or name == "tracking_noise",
+                                            name=f"{model.name}+{name}")
                 continue
             eff = make_effect(e, **config)
             if any(x.name == eff.name for x in model.extra):
@@ -66,9 +75,8 @@ class TrapModel(eqx.Module):
                     f"effect {eff.name!r} ({eff.kind}) is not part of the Gaussian likelihood; "
                     "diagnose() tests it from the frame histogram / time stamps"
                 )
-            model = TrapModel(blur=model.blur, alias=model.alias, noise=model.noise,
-                              name=f"{model.name}+{eff.name}", extra=model.extra + (eff,),
-                              n_alias=model.n_alias)
+            model = dataclasses.replace(model, name=f"{model.name}+{eff.name}",
+                                        extra=model.extra + (eff,))
         return model
 
     def __add__(self, effect) -> TrapModel:
@@ -151,6 +159,12 @@ class TrapModel(eqx.Module):
             else:
                 lor = 2.0 * col(sigma2) * col(tau) / (1.0 + (2.0 * jnp.pi * f * col(tau)) ** 2)
                 out = lor * jnp.sinc(f * col(w)) ** 2 + col(e2) * col(dt)
+        elif self.alias and use_nodes(f, self.fold_nodes):
+            # long record: the folded part on log-spaced nodes, interpolated; additive
+            # terms (tracking noise below, drift, lines) stay exact at every ordinate
+            folded = partial(self._psd_folded, sigma2=sigma2, tau=tau, w=w, dt=dt,
+                             temperature=temperature, extras=extras)
+            out = folded_on_nodes(folded, f, self.fold_nodes) + col(e2 * dt)
         else:
             out = self._psd_folded(f, sigma2, tau, w, dt, temperature, extras) + col(e2 * dt)
         for e in self.extra:
