@@ -94,8 +94,11 @@ def make_layout(recordings, k_mode: str, noise: bool, extra_names: tuple = ()) -
 
 
 #: padded lengths are rounded up to 2^j times one of these (``bucket_length``), so that
-#: recordings of nearby lengths share one compiled fit; ``None`` turns bucketing off
-BUCKET_STEPS: tuple | None = (1.0, 1.25, 1.5, 1.75)
+#: recordings of nearby lengths share one compiled fit; ``None`` turns bucketing off. Plain
+#: powers of two: a compilation (15-25 s on 2 cores) costs far more than fitting up to twice
+#: the ordinates or frames (< 0.5 s at 2^16 frames); (1, 1.25, 1.5, 1.75) gave 2-3x more
+#: compilations over one octave of lengths (benchmarks/bench_buckets.py)
+BUCKET_STEPS: tuple | None = (1.0,)
 #: lengths up to this are rounded up to a power of two (tiny arrays: padding is free)
 _BUCKET_MIN = 64
 

@@ -22,7 +22,8 @@ from blurtrap.inference._irregular import irregular_nll, make_irregular_args
 from blurtrap.inference._models import get_model
 from blurtrap.inference._problems import bucket_length, exact_nll, make_exact_args, make_layout
 
-STEPS = (1.0, 1.25, 1.5, 1.75)
+STEPS = _problems.BUCKET_STEPS  # the package default (powers of two)
+QUARTER = (1.0, 1.25, 1.5, 1.75)
 NAMES = ("k", "gamma", "tracking_var")
 
 
@@ -52,19 +53,21 @@ def rec(y, **kw):
     return bt.Recording(y, frame_interval=DT, exposure=DT, **kw)
 
 
-def test_bucket_length_is_a_small_set_of_sizes():
-    """At least n, at most 25 % padding above 64, monotone, few distinct sizes, n when off."""
+def test_bucket_length_is_a_small_set_of_sizes(monkeypatch):
+    """At least n, monotone, few distinct sizes, n when off: powers of two by default (at
+    most 2x padding), at most 25 % padding above 64 with quarter steps."""
     n = np.arange(1, 200_000)
-    b = np.array([bucket_length(int(v)) for v in n])
-    assert np.all(b >= n) and np.all(np.diff(b) >= 0)
-    assert np.all(b[n > 64] <= 1.25 * n[n > 64])
-    assert len(np.unique(b[(n >= 50_000) & (n <= 70_000)])) == 3  # 57344, 65536, 81920
+    for steps, over, n_sizes in ((STEPS, 2.0, 2), (QUARTER, 1.25, 3)):
+        monkeypatch.setattr(_problems, "BUCKET_STEPS", steps)
+        b = np.array([bucket_length(int(v)) for v in n])
+        assert np.all(b >= n) and np.all(np.diff(b) >= 0)
+        assert np.all(b[n > 64] < over * n[n > 64] + 1e-9)
+        assert len(np.unique(b[(n >= 50_000) & (n <= 70_000)])) == n_sizes
     assert bucket_length(65536) == 65536 and bucket_length(65537) == 81920
-    _problems.BUCKET_STEPS, saved = None, _problems.BUCKET_STEPS
-    try:
-        assert bucket_length(12345) == 12345
-    finally:
-        _problems.BUCKET_STEPS = saved
+    monkeypatch.setattr(_problems, "BUCKET_STEPS", (1.0,))
+    assert bucket_length(65537) == 131072 and bucket_length(3000) == 4096
+    monkeypatch.setattr(_problems, "BUCKET_STEPS", None)
+    assert bucket_length(12345) == 12345
 
 
 def _compare(a, b):
@@ -104,7 +107,7 @@ def test_exact_likelihood_ignores_masked_frames(buckets, mean):
     """The exact (and irregular-time) likelihood with extra masked frames equals the
     unpadded one for every mean treatment, at parameters away from the optimum; the frames
     have a large offset so that a mean leaking the padding would show."""
-    recs = [rec(frames(n, 20 + n) + 3e-7) for n in (1100, 900)]  # padded to 1280 frames
+    recs = [rec(frames(n, 20 + n) + 3e-7) for n in (1100, 900)]  # padded to 2048 frames
     t = np.arange(700) * DT + np.random.default_rng(1).uniform(-0.1 * DT, 0.1 * DT, 700)
     jit = [bt.Recording(frames(700, 5) + 3e-7, frame_interval=float(np.median(np.diff(t))),
                         exposure=0.5 * DT, times=t, allow_irregular=True)]
@@ -123,8 +126,8 @@ def test_exact_likelihood_ignores_masked_frames(buckets, mean):
 
 
 @pytest.mark.parametrize("kw, n_a, n_b, n_c", [
-    ({"likelihood": "whittle"}, 11_000, 12_000, 13_000),  # 6144 ordinates; 7168
-    ({"likelihood": "exact"}, 2600, 3000, 3200),  # 3072 frames; 3584
+    ({"likelihood": "whittle"}, 9000, 12_000, 17_000),  # 8192 ordinates; 16384
+    ({"likelihood": "exact"}, 2600, 3900, 4200),  # 4096 frames; 8192
 ], ids=["whittle", "exact"])
 def test_new_length_in_the_same_bucket_does_not_recompile(compiles, buckets, kw, n_a, n_b,
                                                           n_c):
