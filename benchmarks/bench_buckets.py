@@ -1,7 +1,7 @@
 """Extra seconds a recording of a new length costs in a process that has calibrated once.
 
 ``calibrate`` pads the periodogram ordinates (spectral fits) and the frames (exact
-likelihood) to bucket lengths (``_problems.bucket_length``: 2^j times 1, 1.25, 1.5 or 1.75),
+likelihood) to bucket lengths (``_problems.bucket_length``: powers of two by default),
 so recordings of nearby lengths share compiled programs. In one fresh process per tree this
 script calibrates a first recording (compiles), repeats it (warm time), then calibrates
 ``--count`` recordings of other lengths and reports, per new length, the time minus the warm
