@@ -35,7 +35,7 @@ import numpy as np
 
 from ..physics._constants import BOLTZMANN
 from ._models import TrapModel
-from ._problems import Layout, RecMeta, rec_meta
+from ._problems import Layout, RecMeta, bucket_length, rec_meta
 
 _LOG2PI = math.log(2.0 * math.pi)
 #: below this alpha = W/tau the exposure terms use their Taylor series (the direct formulas
@@ -167,7 +167,7 @@ def check_irregular_model(model: TrapModel, recordings) -> None:
 
 def make_irregular_args(recordings, layout, model, mean="reml") -> IrregularArgs:
     check_irregular_model(model, recordings)
-    n_max = max(r.n_frames for r in recordings)
+    n_max = bucket_length(max(r.n_frames for r in recordings))  # masked beyond each record
     ys = np.zeros((len(recordings), n_max))
     dts = np.ones((len(recordings), n_max))
     mask = np.zeros((len(recordings), n_max))

@@ -21,7 +21,7 @@ from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
 from ._refusals import _check_fit, _check_relaxation_resolved
-from ._spectral import _psd_jit, _spectral_args, spectral_gof
+from ._spectral import _psd_jit, _spectral_args, spectral_gof, unpadded
 from ._starts import _start_vector
 
 
@@ -40,8 +40,8 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
-              "f": np.asarray(args.f), "ratio": np.asarray(args.power / psd),
-              "weight": np.asarray(args.weight)}
+              "f": unpadded(args, args.f), "ratio": unpadded(args, args.power / psd),
+              "weight": unpadded(args, args.weight)}
     res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound,
                     interval_source=_interval_source(spectral_nll, args, scale, out, held))

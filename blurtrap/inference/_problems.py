@@ -93,6 +93,29 @@ def make_layout(recordings, k_mode: str, noise: bool, extra_names: tuple = ()) -
     )
 
 
+#: padded lengths are rounded up to 2^j times one of these (``bucket_length``), so that
+#: recordings of nearby lengths share one compiled fit; ``None`` turns bucketing off. Plain
+#: powers of two: a compilation (15-25 s on 2 cores) costs far more than fitting up to twice
+#: the ordinates or frames (< 0.5 s at 2^16 frames); (1, 1.25, 1.5, 1.75) gave 2-3x more
+#: compilations over one octave of lengths (benchmarks/bench_buckets.py)
+BUCKET_STEPS: tuple | None = (1.0,)
+#: lengths up to this are rounded up to a power of two (tiny arrays: padding is free)
+_BUCKET_MIN = 64
+
+
+def bucket_length(n: int) -> int:
+    """The padded length for ``n`` real entries: the smallest ``2^j * s`` (``s`` in
+    :data:`BUCKET_STEPS`, an integer) that is at least ``n``; ``n`` itself when bucketing is
+    off. Every reduction over padded arrays gives the padding weight (or mask) 0."""
+    n = int(n)
+    if BUCKET_STEPS is None or n <= 1:
+        return max(n, 1)
+    if n <= _BUCKET_MIN:
+        return 1 << (n - 1).bit_length()
+    base = 1 << ((n - 1).bit_length() - 1)  # base < n <= 2 base
+    return min(int(round(base * s)) for s in (*BUCKET_STEPS, 2.0) if base * s >= n)
+
+
 class RecMeta(eqx.Module):
     dt: jax.Array
     w: jax.Array
@@ -120,6 +143,7 @@ class SpectralArgs(eqx.Module):
     weight: jax.Array  # (R, M): n_blocks (1/2 at Nyquist), 0 on padding
     log_ref: jax.Array
     block_len: jax.Array | None = None  # (R,) frames per block: exact expected periodogram
+    n_ordinates: jax.Array | None = None  # (R,) real ordinates (the rest is bucket padding)
 
 
 def spectral_model_psd(p, a: SpectralArgs):
@@ -375,7 +399,7 @@ class ExactArgs(eqx.Module):
 
 
 def make_exact_args(recordings, layout, model, mean="reml") -> ExactArgs:
-    n_max = max(r.n_frames for r in recordings)
+    n_max = bucket_length(max(r.n_frames for r in recordings))  # masked beyond each record
     ys = np.zeros((len(recordings), n_max))
     mask = np.zeros((len(recordings), n_max))
     for i, r in enumerate(recordings):

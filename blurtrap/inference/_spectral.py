@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import chi2_sf
-from ._problems import SpectralArgs, rec_meta, spectral_model_psd
+from ._problems import SpectralArgs, bucket_length, rec_meta, spectral_model_psd
 
 
 def _np_periodogram(y, dt, n_blocks=1):
@@ -87,9 +87,10 @@ def _spectral_args(recs, layout, model, n_blocks, f_range, excluded=None):
         fs.append(f)
         ps.append(p)
         ws.append(wt)
-    m_max = max(len(f) for f in fs)
-    if m_max == 0:
+    m_real = max(len(f) for f in fs)
+    if m_real == 0:
         raise ValueError(f"f_range = {f_range} Hz leaves no frequencies to fit")
+    m_max = bucket_length(m_real)  # weight 0 beyond m_real: one compiled fit per bucket
     ref = float(np.mean(np.concatenate(ps)))
 
     def pad(arrs, fill):
@@ -109,7 +110,17 @@ def _spectral_args(recs, layout, model, n_blocks, f_range, excluded=None):
         log_ref=jnp.asarray(np.log(ref)),
         block_len=(jnp.asarray(np.array(ms, dtype=float))
                    if model.alias and model.closed_form else None),
+        n_ordinates=jnp.asarray(np.array([len(f) for f in fs], dtype=np.int32)),
     )
+
+
+def unpadded(args: SpectralArgs, z):
+    """``z`` of shape (R, M) on the host without the bucket padding beyond the longest
+    recording's ordinates (what results and reports show)."""
+    z = np.asarray(z)
+    if args.n_ordinates is None:
+        return z
+    return z[..., : int(np.max(np.asarray(args.n_ordinates)))]
 
 
 _psd_jit = eqx.filter_jit(spectral_model_psd)
