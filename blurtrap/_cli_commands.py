@@ -5,6 +5,7 @@ write the ``--report DIR`` (:mod:`blurtrap._report`)."""
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 from .cli import CliError, dumps_json
 
@@ -102,7 +103,7 @@ def _calibrate_xy(path, kw: dict, as_json: bool) -> int:
     from .inference import calibrate_xy
 
     loaded = load(path)
-    items = loaded if isinstance(loaded, list) else [loaded]
+    items: list[Any] = loaded if isinstance(loaded, list) else [loaded]
     results = []
     for i, xy in enumerate(items):
         try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 from . import _report_figures as rf
 
@@ -43,7 +44,7 @@ def _recordings(source):
     subtraction the fit may do)."""
     from .data import Recording, load
 
-    data = load(source)
+    data: Any = load(source)
     return [data] if isinstance(data, Recording) else list(data)
 
 

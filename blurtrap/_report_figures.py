@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +62,8 @@ def spectrum_figure(rec, fit, title: str):
 
     model = has_trap_model(fit)
     fig = plt.figure(figsize=(9.0, 8.4 if model else 4.6), layout="constrained")
-    top, bottom = fig.subfigures(2, 1, height_ratios=(1.1, 1.0)) if model else (fig, None)
+    subs: Any = fig.subfigures(2, 1, height_ratios=(1.1, 1.0)) if model else (fig, None)
+    top, bottom = subs
     ax = top.subplots()
     bp.fig6_psd(rec, fit if model else None, n_blocks=n_blocks_for(fit, [rec]), ax=ax)
     ax.set_title(f"power spectrum, {title}: fs = {rec.sampling_rate:.5g} Hz, "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,7 +55,8 @@ class XYRecording:
                 raise ValueError(f"XYRecording: x and y must share {attr}; got {a!r} (x) and "
                                  f"{b!r} (y)")
         tx, ty = x.times, y.times
-        if (tx is None) != (ty is None) or (tx is not None and not np.array_equal(tx, ty)):
+        if (tx is None) != (ty is None) or (tx is not None and ty is not None
+                                            and not np.array_equal(tx, ty)):
             raise ValueError("XYRecording: x and y must have the same time stamps (or none)")
         object.__setattr__(self, "_x", x)
         object.__setattr__(self, "_y", y)
@@ -158,8 +160,9 @@ def xy_from_arrays(x, y, *, frame_interval, exposure, temperature=DEFAULT_TEMPER
     if nx != ny:
         raise ValueError(f"xy_from_arrays: x and y must have the same length; got len(x) = "
                          f"{nx[0]} and len(y) = {ny[0]}")
-    common = dict(frame_interval=frame_interval, exposure=exposure, temperature=temperature,
-                  times=times, metadata=metadata, **kwargs)
+    common: dict[str, Any] = dict(frame_interval=frame_interval, exposure=exposure,
+                                  temperature=temperature, times=times, metadata=metadata,
+                                  **kwargs)
     rx = Recording(x, name=None if name is None else f"{name}:x", **common)
     ry = Recording(y, name=None if name is None else f"{name}:y", **common)
     return XYRecording(rx, ry, name=name)

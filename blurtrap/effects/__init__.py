@@ -56,6 +56,9 @@ def lab_units(name: str) -> tuple[float, str]:
     return (q.lab_factor, q.lab_unit) if q is not None else (1.0, "SI")
 
 
-__all__ = ["EFFECTS", "QUANTITIES", "AbstractEffect", "Param", "StartContext", "lab_units",
-           "make_effect",
-           *(cls.__name__ for cls in EFFECTS.values())]
+__all__ = [
+    "EFFECTS", "QUANTITIES", "AbstractEffect", "Aliasing", "Anharmonicity", "DetectorFilter",
+    "Drift", "ExposureKernel", "Hydrodynamics", "LaserHeating", "LineNoise", "MotionBlur",
+    "Param", "PowerOffset", "StartContext", "TimingJitter", "TrackingNoise", "lab_units",
+    "make_effect",
+]

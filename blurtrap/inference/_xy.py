@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -330,12 +330,13 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
         expected = _expected_gamma_se(k1, k2, gamma, eps2, xy, noise)
     seps = None
     if separate:
-        seps = tuple(_alone(r, i, notes, kwargs) for i, r in enumerate((u, v), start=1))
+        seps = (_alone(u, 1, notes, kwargs), _alone(v, 2, notes, kwargs))
     return XYCalibration(
         k1=k1, k1_err=float(math.sqrt(cov_k[0, 0])), k2=k2,
         k2_err=float(math.sqrt(cov_k[1, 1])), phi=phi, phi_err=phi_err, gamma=gamma,
         gamma_err=float(joint.gamma_err), tracking_var=eps2, k_x=kxx, k_x_err=exx,
         k_y=kyy, k_y_err=eyy, k_xy=kxy, k_xy_err=exy, frame_covariance=cov,
         anisotropy_z=float(z), resolved=bool(resolved), temperature=float(xy.temperature),
-        n_frames=xy.n_frames, joint=joint, separate=seps, expected_gamma_se=expected,
+        n_frames=xy.n_frames, joint=joint, separate=seps,
+        expected_gamma_se=cast(Any, expected),
         notes=tuple(notes) + tuple(joint.notes))

@@ -13,6 +13,8 @@ on x and on y, independent) is added after the rotation.
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -51,7 +53,8 @@ def simulate_xy(k1, k2, gamma, exposure, frame_interval, n_frames: int, *, key, 
         raise ValueError("simulate_xy: injections are not supported (they would act on each "
                          "principal axis, not on the detector's axes); add them to the output")
     k_axis1, k_axis2, k_noise = jr.split(key, 3)
-    common = dict(temperature=temperature, n_traces=n_traces, method=method, **kwargs)
+    common: dict[str, Any] = dict(temperature=temperature, n_traces=n_traces, method=method,
+                                  **kwargs)
     u = simulate(k1, gamma, exposure, frame_interval, n_frames, key=k_axis1, **common)
     v = simulate(k2, gamma, exposure, frame_interval, n_frames, key=k_axis2, **common)
     phi = jnp.asarray(angle, dtype=u.dtype)
