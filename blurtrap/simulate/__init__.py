@@ -16,6 +16,9 @@ from ._antialias import (
 from ._antialias import (
     simulate_photodiode as simulate_photodiode,
 )
+from ._exposure import (
+    ExposureWindows as ExposureWindows,
+)
 from ._injections import (
     AbstractInjection as AbstractInjection,
 )
@@ -61,10 +64,7 @@ from ._profiles import (
 from ._profiles import (
     quartic_force as quartic_force,
 )
-from ._simulate import (
-    ExposureWindows as ExposureWindows,
-)
-from ._simulate import (
+from ._scan_coefs import (
     SubstepBiasWarning as SubstepBiasWarning,
 )
 from ._simulate import (

@@ -149,7 +149,8 @@ def simulate_photodiode(
     **Raises:** ``ValueError`` for a bad filter, :class:`TimingJitter`, or the arguments
     :func:`simulate` refuses. Cost: ``M`` exact fast frames plus an FFT per output frame.
     """
-    from ._simulate import _as_keys, simulate
+    from ._simulate import simulate
+    from ._validate import as_keys as _as_keys
 
     h = antialias_taps(oversample, cutoff, transition, attenuation_db)
     half = h.size // 2

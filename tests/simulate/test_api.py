@@ -167,7 +167,7 @@ def test_default_chunks_are_few_and_waste_little():
     """Default chunking: the fewest chunks of at most max_chunk frames, and the frames computed
     beyond the run (a partial last chunk runs in full) are fewer than one max_chunk/16 step
     per chunk (a fixed max_chunk wasted up to a whole chunk)."""
-    from blurtrap.simulate._simulate import _balanced_chunk
+    from blurtrap.simulate._scan_run import balanced_chunk as _balanced_chunk
 
     for max_chunk in (1, 2, 3, 16, 17, 100, 41527):
         for total in [*range(1, 200), 41528, 65536, 10**6 + 3]:

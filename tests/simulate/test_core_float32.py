@@ -11,10 +11,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from blurtrap.simulate import ExposureWindows, _simulate, simulate
+from blurtrap.simulate import ExposureWindows, _core, simulate
 
 K, TAU = 5e-5, 0.537e-3
-NOISE = ("B", "is", "sm", "cx", "sx")  # the noise coefficients of the three scans
+NOISE = ("B", "istd", "sm", "cx", "sx")  # the noise coefficients of the three scans
 
 CASES = {
     # one window: the innovations form; h = dt = 1e-4 tau, 20 000 frames
@@ -29,15 +29,16 @@ CASES = {
 def _decay(monkeypatch, case, dtype):
     r, n, kw = CASES[case]
     calls = []
-    real = _simulate.run_chunk_jit
-    monkeypatch.setattr(_simulate, "run_chunk_jit", lambda *a: calls.append(a) or real(*a))
+    real = _core.run_chunk_jit
+    monkeypatch.setattr(_core, "run_chunk_jit", lambda *a: calls.append(a) or real(*a))
     w = ExposureWindows([r * TAU]) if case == "segment" else r * TAU
     simulate(K, K * TAU, w, r * TAU, n, key=jax.random.key(0), n_traces=2, dtype=dtype, **kw)
     cfg, n_c, lead, P, fp, kf, kj, x, delta, f0 = calls[0]
     assert n_c >= n  # one chunk
-    P = {name: (jnp.zeros_like(v) if name in NOISE else v) for name, v in P.items()}
+    P = P._replace(**{name: jnp.zeros_like(v) for name, v in P._asdict().items()
+                      if name in NOISE and v is not None})
     _, _, frames, _ = real(cfg, n_c, lead, P, fp, kf, kj, jnp.ones_like(x), delta, f0)
-    return np.asarray(frames, np.float64).reshape(-1, n_c)[0, :n] / float(P["scale"][0])
+    return np.asarray(frames, np.float64).reshape(-1, n_c)[0, :n] / float(P.scale[0])
 
 
 @pytest.mark.parametrize("case", list(CASES))

@@ -5,7 +5,7 @@ import jax
 import numpy as np
 import pytest
 
-from blurtrap.simulate import ExposureWindows, _core, _simulate, simulate
+from blurtrap.simulate import ExposureWindows, _core, simulate
 
 K, TAU = 5e-5, 0.537e-3
 CASES = [
@@ -32,7 +32,7 @@ def test_tiles_give_the_untiled_numbers(monkeypatch, method, kw):
         # is read when run_chunk is traced; unlike jax.clear_caches(), this keeps the other
         # tests' compiled programs in this worker
         monkeypatch.setattr(_core, "run_chunk", lambda *args: run_chunk(*args))
-        monkeypatch.setattr(_simulate, "run_chunk_jit", _core._jit_for_cpu())
+        monkeypatch.setattr(_core, "run_chunk_jit", _core._jit_for_cpu())
         tiles.clear()
         x = np.asarray(simulate(K, K * TAU, frame_interval=TAU, n_frames=6,
                                 key=jax.random.key(5), n_traces=700, method=method,
