@@ -55,8 +55,8 @@ def simulate_xy(k1, k2, gamma, exposure, frame_interval, n_frames: int, *, key, 
     k_axis1, k_axis2, k_noise = jr.split(key, 3)
     common: dict[str, Any] = dict(temperature=temperature, n_traces=n_traces, method=method,
                                   **kwargs)
-    u = simulate(k1, gamma, exposure, frame_interval, n_frames, key=k_axis1, **common)
-    v = simulate(k2, gamma, exposure, frame_interval, n_frames, key=k_axis2, **common)
+    u: Any = simulate(k1, gamma, exposure, frame_interval, n_frames, key=k_axis1, **common)
+    v: Any = simulate(k2, gamma, exposure, frame_interval, n_frames, key=k_axis2, **common)
     phi = jnp.asarray(angle, dtype=u.dtype)
     c, s = jnp.cos(phi), jnp.sin(phi)
     x = c * u - s * v
