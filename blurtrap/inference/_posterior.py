@@ -43,6 +43,7 @@ from .._config import float64_scope
 from ._calibrate import _default_k_mode, calibrate
 from ._log_posterior import _compiled_log_posterior, _PostArgs
 from ._models import get_model
+from ._pointwise import Pointwise, exact_pointwise, spectral_pointwise
 from ._posterior_priors import _check_user_priors, _resolve_priors
 from ._posterior_result import Posterior, _derived
 from ._priors import LogUniform, Uniform
@@ -132,6 +133,7 @@ class _Setup:
     args: _PostArgs
     lik: Any
     log_prob: Callable  # thetas (n, d) -> float64 numpy (n,)
+    pointwise: Pointwise  # per-observation log-likelihood of natural parameters
 
 
 def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
@@ -162,20 +164,23 @@ def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
 
     # ---- likelihood arguments and the batched log-posterior ----------------------------
     if likelihood == "whittle":
-        lik = _spectral_args(recs, layout, mdl, 1, f_range)
+        lik = spec = _spectral_args(recs, layout, mdl, 1, f_range)
         if _rational_ok(mdl, f_range):
             rat = _rational_args(recs, lik)
             if lik.block_len is None or _leakage(np.exp(theta_ml), rat) <= LEAKAGE_MAX:
-                lik = rat
+                lik = rat  # the discrete PSD P_d: per ordinate, spec without block_len
+                spec = dataclasses.replace(spec, block_len=None)
+        pointwise = spectral_pointwise(spec)
     else:
         lik = make_exact_args(recs, layout, mdl)
+        pointwise = exact_pointwise(lik)
     args = _PostArgs(lik=lik, priors=prior_objs, names=tuple(layout.names),
                      user_log_prior=user_fns, chunk=None if likelihood == "exact" else 1)
 
     log_prob = _compiled_log_posterior(args)
     return _Setup(recs=recs, model=mdl, layout=layout, k_mode=k_mode, ml=ml,
                   theta_start=theta_ml, cov_theta=cov_theta, args=args, lik=lik,
-                  log_prob=log_prob)
+                  log_prob=log_prob, pointwise=pointwise)
 
 
 # ------------------------------------------------------------------------------------------
@@ -367,4 +372,5 @@ def sample_posterior(
         timing={"compile_s": t_compile, "sampling_s": t_sample},
         evaluation=("exact" if likelihood == "exact" else "whittle_closed_form"
                     if isinstance(su.lik, _RationalWhittleArgs) else "whittle_ordinates"),
+        pointwise=su.pointwise,
     )
