@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import functools
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
@@ -34,17 +33,13 @@ def _make_mesh(shard, n_traces):
     return Mesh(np.asarray(devices), ("traces",))
 
 
-def _progress(done, total, t0, stream):
-    width = 30
-    filled = int(width * done / total)
-    elapsed = time.perf_counter() - t0
-    stream.write(
-        f"\rsimulate [{'#' * filled}{'.' * (width - filled)}] chunk {done}/{total} "
-        f"{elapsed:7.1f} s"
-    )
-    if done == total:
-        stream.write("\n")
-    stream.flush()
+def _progress_bar(total: int, enabled: bool):
+    """A tqdm bar over the chunks (stderr; a widget in notebooks), refreshed every chunk."""
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="simulate", unit="chunk", mininterval=0.0, file=sys.stderr)
 
 
 _CHUNK_STEPS = 16
@@ -145,7 +140,7 @@ def run_scan(method, plan, keys, shape, n_win, windows, n_traces, n_frames, burn
         cfg, plan, keys, n_traces, dtype, lead,
         lead + (t_buf, n_buf) if n_chunks > 1 else None, mesh, n_chunks)
     fp = force_params if force is not None else None
-    t0 = time.perf_counter()
+    bar = _progress_bar(n_chunks, progress)
     for c in range(n_chunks):
         x, delta, out, dout = _core.run_chunk_jit(
             cfg, chunk, lead, plan.coefs, fp, k_frames, k_jit, x, delta, jnp.int32(c * chunk)
@@ -156,9 +151,11 @@ def run_scan(method, plan, keys, shape, n_win, windows, n_traces, n_frames, burn
             buf = _place(buf, out, c * chunk)
             if jitter:
                 dbuf = _place(dbuf, dout, c * chunk)
-        if progress:
+        if bar is not None:
             jax.block_until_ready(x)
-            _progress(c + 1, n_chunks, t0, sys.stderr)
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     exact_fit = t_buf == n_traces and burn_in_frames == 0 and n_buf == n_frames
     pos = buf if exact_fit else buf[..., :n_traces, burn_in_frames:total]  # pyright: ignore
     dj = None

@@ -155,7 +155,7 @@ def simulate(
       chunk; ``"exact_frames"``: 32 M frame-trajectories, or 2 M with `progress`). Long runs
       (1e9 substeps) run chunk by chunk in bounded memory: the chunks are placed into one
       output buffer in place, so memory is the output plus one chunk.
-    - `progress`: print a text progress bar to stderr, updated once per chunk.
+    - `progress`: a tqdm progress bar (stderr, or a widget in notebooks), one step per chunk.
     - `shard`: ``"auto"`` (default) shards the traces axis across all local devices when there
       are several and ``n_traces`` is a multiple of their number; ``True`` requires it;
       ``False`` never shards.
