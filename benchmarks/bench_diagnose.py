@@ -29,34 +29,21 @@ import platform
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from _child import child_script, run_child  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DT_CAM = 1 / 1500
 K = 5e-5
 GAMMA = 6 * np.pi * 0.00093 * 1.53e-6
 
-CHILD = r"""
-import json, resource, sys, time
-import numpy as np
-import blurtrap as bt
-bt.enable_x64()
-d = np.load(sys.argv[1])
-recs = [bt.Recording(x, frame_interval=float(dt), exposure=float(w))
-        for x, dt, w in zip(d["x"], d["dt"], d["w"])]
-rss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # GiB
-out = {"rss_data_gib": rss(), "calls": []}
-for _ in range(int(sys.argv[2])):
-    t0 = time.perf_counter()
-    res = bt.diagnose(recs)
-    out["calls"].append({"s": time.perf_counter() - t0, "rss_gib": rss(),
-                         "adequate": bool(res.adequate),
-                         "ranking": [[c.effect, c.delta_loglik, bool(c.significant)]
-                                     for c in res.ranking]})
-print("RESULT " + json.dumps(out))
-"""
+CHILD = child_script(
+    "res = bt.diagnose(recs)",
+    '{"adequate": bool(res.adequate), "ranking": [[c.effect, c.delta_loglik, '
+    'bool(c.significant)] for c in res.ranking]}')
 
 
 def simulate_case(name: str, path: pathlib.Path):
@@ -83,23 +70,6 @@ def simulate_case(name: str, path: pathlib.Path):
                                      injections=inj))[0]]
         ws, dts = [1e-8], [1e-5]
     np.savez(path, x=np.stack(xs), dt=np.asarray(dts), w=np.asarray(ws))
-
-
-def run_child(code_root: pathlib.Path, data: pathlib.Path, calls: int, timeout: float):
-    env = dict(os.environ, PYTHONPATH=str(code_root), JAX_ENABLE_X64="1")
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, "-c", CHILD, str(data), str(calls)], env=env,
-                              capture_output=True, text=True, timeout=timeout, cwd=code_root)
-    except subprocess.TimeoutExpired:
-        return {"error": f"timeout after {timeout:.0f} s"}
-    line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")]
-    if not line:
-        return {"error": proc.stderr[-2000:]}
-    out = json.loads(line[0][7:])
-    out["process_s"] = time.perf_counter() - t0
-    return out
 
 
 def old_checkout(rev: str) -> pathlib.Path:
@@ -164,7 +134,7 @@ def run_plan(args, old_root):
         root = ROOT if version == "new" else old_root
         assert root is not None
         load = os.getloadavg()[0]
-        res = run_child(root, data, calls, args.timeout)
+        res = run_child(root, data, calls, args.timeout, CHILD)
         res.update(version=version, case=case, load=load)
         print(f"{version:3s} {case:12s} load {load:4.1f}: {fmt(res)}", flush=True)
         if args.out:

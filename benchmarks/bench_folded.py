@@ -24,35 +24,19 @@ import platform
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
+from _child import child_script, run_child  # noqa: E402
 from bench_diagnose import old_checkout  # noqa: E402
 
 K = 5e-5
 GAMMA = 6 * np.pi * 0.00093 * 1.53e-6
 
-CHILD = r"""
-import json, resource, sys, time
-import numpy as np
-import blurtrap as bt
-bt.enable_x64()
-d = np.load(sys.argv[1])
-recs = [bt.Recording(x, frame_interval=float(dt), exposure=float(w))
-        for x, dt, w in zip(d["x"], d["dt"], d["w"])]
-rss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # GiB
-out = {"rss_data_gib": rss(), "calls": []}
-for _ in range(int(sys.argv[2])):
-    t0 = time.perf_counter()
-    res = bt.calibrate(recs, model="standard+detector_filter")
-    est = {n: [float(v), float(e)] for n, v, e in
-           zip(res.param_names, res.values, res.errors)}
-    out["calls"].append({"s": time.perf_counter() - t0, "rss_gib": rss(), "est": est})
-print("RESULT " + json.dumps(out))
-"""
+CHILD = child_script('res = bt.calibrate(recs, model="standard+detector_filter")',
+                     '{"est": {n: [float(v), float(e)] for n, v, e in zip(res.param_names, res.values, res.errors)}}')
 
 
 def simulate(n: int, path: pathlib.Path):
@@ -66,23 +50,6 @@ def simulate(n: int, path: pathlib.Path):
                                method="exact_frames", tracking_std=2e-9,
                                injections=(PhotodiodeFilter(8e3, 0.4),)))[0]
     np.savez(path, x=x[None, :], dt=np.asarray([1e-5]), w=np.asarray([1e-8]))
-
-
-def run_child(code_root: pathlib.Path, data: pathlib.Path, calls: int, timeout: float):
-    env = dict(os.environ, PYTHONPATH=str(code_root), JAX_ENABLE_X64="1")
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, "-c", CHILD, str(data), str(calls)], env=env,
-                              capture_output=True, text=True, timeout=timeout, cwd=code_root)
-    except subprocess.TimeoutExpired:
-        return {"error": f"timeout after {timeout:.0f} s"}
-    line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")]
-    if not line:
-        return {"error": proc.stderr[-2000:]}
-    out = json.loads(line[0][7:])
-    out["process_s"] = time.perf_counter() - t0
-    return out
 
 
 def fmt(res) -> str:
@@ -136,7 +103,7 @@ def run_plan(args, old_root):
             simulate(int(n), data)
         root = ROOT if version == "new" else old_root
         load = os.getloadavg()[0]
-        res = run_child(root, data, int(calls or 1), args.timeout)
+        res = run_child(root, data, int(calls or 1), args.timeout, CHILD)
         res.update(version=version, n=int(n), load=load)
         print(f"{version:3s} N = {n:>8s} load {load:4.1f}: {fmt(res)}", flush=True)
         if args.out:
