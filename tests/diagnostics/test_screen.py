@@ -5,35 +5,23 @@ tested in tests/inference/test_fold_nodes.py). It must land on the optimum of th
 screening fit, and its cost in memory must not scale with (ordinates x alias terms)."""
 
 import dataclasses
+import os
+import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import blurtrap as bt
 from blurtrap.diagnostics._screen import screen
 from blurtrap.inference._models import get_model
-from blurtrap.inference._problems import make_layout, spectral_nll
-from blurtrap.inference._spectral import _spectral_args
-from blurtrap.physics._effects import water_viscosity
+from blurtrap.inference._problems import spectral_nll
 from blurtrap.simulate import PhotodiodeFilter
 
-K = 5e-5
-GAMMA = 6 * np.pi * float(water_viscosity(295.0)) * 0.75e-6
-
-
-def _record(dt, w, n, seed=0, injections=()):
-    x = np.asarray(bt.simulate(K, GAMMA, w, dt, n, key=jax.random.key(seed),
-                               method="exact_frames", tracking_std=2e-9,
-                               injections=injections))[0]
-    return bt.Recording(x, frame_interval=dt, exposure=w)
-
-
-def _spec(recs, model):
-    mdl = get_model(model)
-    layout = make_layout(recs, "shared", True, tuple(p.name for p in mdl.extra_params))
-    return _spectral_args(recs, layout, mdl, 1, None)
+sys.path.insert(0, os.path.dirname(os.path.dirname(__file__)))
+from _fold_helpers import GAMMA, K  # noqa: E402,F401
+from _fold_helpers import record as _record  # noqa: E402
+from _fold_helpers import spec as _spec  # noqa: E402
 
 
 def test_screening_fit_matches_exact_screening():

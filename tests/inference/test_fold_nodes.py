@@ -4,35 +4,21 @@ ordinate (``fold_nodes=0``): PSD and Whittle log-likelihood, and the estimates o
 calibrate on a filtered photodiode record."""
 
 import dataclasses
+import os
+import sys
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import blurtrap as bt
-from blurtrap.inference._models import get_model
 from blurtrap.inference._nodes import MIN_ORDINATES, hermite_log, node_plan, use_nodes
-from blurtrap.inference._problems import make_layout, spectral_model_psd, spectral_nll
-from blurtrap.inference._spectral import _spectral_args
-from blurtrap.physics._effects import water_viscosity
+from blurtrap.inference._problems import spectral_model_psd, spectral_nll
 
-K = 5e-5
-GAMMA = 6 * np.pi * float(water_viscosity(295.0)) * 0.75e-6
-
-
-def _record(dt, w, n, seed=0, injections=()):
-    x = np.asarray(bt.simulate(K, GAMMA, w, dt, n, key=jax.random.key(seed),
-                               method="exact_frames", tracking_std=2e-9,
-                               injections=injections))[0]
-    return bt.Recording(x, frame_interval=dt, exposure=w)
-
-
-def _spec(recs, model):
-    mdl = get_model(model)
-    layout = make_layout(recs, "shared", True, tuple(p.name for p in mdl.extra_params))
-    return _spectral_args(recs, layout, mdl, 1, None)
+sys.path.insert(0, os.path.dirname(os.path.dirname(__file__)))
+from _fold_helpers import GAMMA, K  # noqa: E402,F401
+from _fold_helpers import record as _record  # noqa: E402
+from _fold_helpers import spec as _spec  # noqa: E402
 
 
 def _exact(spec):
