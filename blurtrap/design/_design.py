@@ -21,8 +21,7 @@ import numpy as np
 import optimistix as optx
 
 from .._config import float64_scope
-from ..physics import BOLTZMANN
-from ..physics._effects import water_viscosity
+from ..physics import BOLTZMANN, water_viscosity
 from ._fisher import whittle_information
 
 TARGETS = ("k", "gamma", "both")
@@ -69,7 +68,7 @@ class DesignResult:
     def plot(self, ax=None):
         """Predicted SE against exposure and frame interval, candidates marked
         (:func:`blurtrap.plotting.design_se`; imports matplotlib). Returns the figure."""
-        from ..plotting._design import design_se
+        from ..plotting import design_se
 
         return design_se(self, ax=ax)
 

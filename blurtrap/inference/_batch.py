@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import float64_scope, warn_if_float32
-from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
+from .._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 from . import _batch_checks as checks
 from ._fit import _finish_from, _newton, fit_ml
 from ._models import get_model

@@ -19,8 +19,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics._blur import _blur_factor, _rho_b
-from ..physics._constants import BOLTZMANN
+from .._constants import BOLTZMANN
+from ..physics import blur_factor_unchecked as _blur_factor
+from ..physics import rho_b_unchecked as _rho_b
 from ._likelihood import arma_loglik
 from ._models import TrapModel
 from ._newton import AbstractObjective

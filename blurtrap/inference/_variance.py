@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics._constants import BOLTZMANN
-from ..physics._spectra import _sample_variance_var
+from .._constants import BOLTZMANN
+from ..physics import sample_variance_var_unchecked as _sample_variance_var
 from ._models import TrapModel
 from ._problems import Layout, RecMeta
 

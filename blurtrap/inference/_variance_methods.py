@@ -148,7 +148,7 @@ def _equipartition(recs, diffusion, pade):
             ks.append(k)
             kerr.append(k * se / v)
         else:
-            from ..physics._blur import stiffness_from_variance
+            from ..physics import stiffness_from_variance
 
             meth = "pade" if pade else "exact"
             k = float(stiffness_from_variance(v, diffusion, float(r.exposure), float(r.temperature),
