@@ -19,7 +19,7 @@ from ._io import from_arrays as from_arrays
 from ._io import holds_xy as holds_xy
 from ._io import load as load
 from ._manifest import load_manifest as load_manifest
-from ._manifest import save_manifest as save_manifest
+from ._manifest_save import save_manifest as save_manifest
 from ._npz import load_npz as load_npz
 from ._npz import save_npz as save_npz
 from ._recording import Recording as Recording
