@@ -19,7 +19,8 @@ from ._result import LAB as _LAB_UNITS
 from ._result import CalibrationResult, FitError
 from ._spectral import _psd_jit, _spectral_args
 from ._starts import _start_vector
-from ._variance import VarianceArgs, empirical_variance_se, fit_variances, profile_intervals
+from ._variance import VarianceArgs, empirical_variance_se, fit_variances
+from ._variance_profile import profile_intervals
 
 
 def _joint_likelihood_se(recs, layout, model, p):
