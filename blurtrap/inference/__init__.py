@@ -7,8 +7,8 @@ from ._allan import AllanVariance as AllanVariance
 from ._allan import allan_variance as allan_variance
 from ._anharmonic import AnharmonicResult as AnharmonicResult
 from ._anharmonic import calibrate_anharmonic as calibrate_anharmonic
-from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
+from ._batch_result import BatchCalibration as BatchCalibration
 from ._calibrate import calibrate as calibrate
 from ._drift import (
     drift_extrapolation as drift_extrapolation,
