@@ -1,9 +1,10 @@
-"""The bodies of ``blurtrap calibrate`` and ``blurtrap diagnose`` (their parsers are in
-:mod:`blurtrap.cli`): load, fit or diagnose, print the lab-unit table or one JSON object, and
-write the ``--report DIR`` (:mod:`blurtrap._report`)."""
+"""The bodies of ``blurtrap calibrate``, ``diagnose``, ``simulate`` and ``design`` (their
+parsers are in :mod:`blurtrap._cli_parser`): load, fit or diagnose, print the lab-unit table
+or one JSON object, and write the ``--report DIR`` (:mod:`blurtrap._report`)."""
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
@@ -201,3 +202,103 @@ def _report_dir(args):
     from ._report import report_dir
 
     return report_dir(args.report)
+
+
+def simulate_command(args) -> int:
+    """``blurtrap simulate``: simulate recordings and write a manifest with their CSVs."""
+    import numpy as np
+
+    from .data import Recording, RecordingSet, save_manifest
+
+    if args.frames < 16:
+        raise CliError(f"--frames must be >= 16; got {args.frames}")
+    if args.fps <= 0:
+        raise CliError(f"--fps must be > 0 Hz; got {args.fps:g}")
+    ks = [k * 1e-3 for k in args.k]
+    if any(not (k > 0) for k in ks):
+        raise CliError(f"--k must be > 0 pN/nm; got {args.k}")
+    if args.gamma is not None:
+        gamma = args.gamma * 1e-6
+        if not gamma > 0:
+            raise CliError(f"--gamma must be > 0 pN s/um; got {args.gamma:g}")
+    else:
+        if not args.radius > 0:
+            raise CliError(f"--radius must be > 0 um; got {args.radius:g}")
+        gamma = 6 * math.pi * args.viscosity * args.radius * 1e-6
+    dt = 1.0 / args.fps
+    ws = [w * 1e-3 for w in args.exposure_ms]
+    for w in ws:
+        if not (0 < w <= dt * (1 + 1e-3)):
+            raise CliError(
+                f"--exposure-ms {w * 1e3:g} must be > 0 and <= the frame interval "
+                f"1000/fps = {dt * 1e3:.6g} ms")
+    w_arr = np.minimum(np.asarray(ws), dt)
+    powers = None
+    if args.power_mw is not None:
+        if len(args.power_mw) != len(ks):
+            raise CliError(f"--power-mw needs one value per --k ({len(ks)}); "
+                           f"got {len(args.power_mw)}")
+        powers = [p * 1e-3 for p in args.power_mw]
+    import jax
+
+    from .simulate import simulate
+
+    # an independent random stream per recording
+    keys = jax.random.split(jax.random.key(args.seed), len(ks) * len(w_arr))
+    keys = keys.reshape(len(ks), len(w_arr))
+    x = simulate(np.asarray(ks)[:, None], gamma, w_arr[None, :], dt, args.frames,
+                 key=keys, temperature=args.temperature,
+                 method="exact_frames", tracking_std=args.tracking_nm * 1e-9)
+    x = np.asarray(x, dtype=float)
+    recs = []
+    for i, k in enumerate(ks):
+        for j, w in enumerate(w_arr):
+            recs.append(Recording(
+                x[i, j, 0], frame_interval=dt, exposure=float(w), temperature=args.temperature,
+                laser_power=None if powers is None else powers[i],
+                name=f"k{k * 1e3:.4g}pN_per_nm_W{w * 1e3:.4g}ms",
+                metadata={"simulated": True, "k_true_N_per_m": k, "gamma_true_N_s_per_m": gamma,
+                          "tracking_std_m": args.tracking_nm * 1e-9, "seed": args.seed},
+            ))
+    from pathlib import Path
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = save_manifest(RecordingSet(recs), out / "manifest.json", "nm")
+    if args.json:
+        print(dumps_json({"manifest": str(written[0]), "files": [str(p) for p in written[1:]],
+                          "n_recordings": len(recs), "n_frames": args.frames,
+                          "gamma_pN_s_per_um": gamma * 1e6,
+                          "k_pN_per_nm": list(args.k), "exposure_ms": list(args.exposure_ms),
+                          "frame_interval_ms": dt * 1e3}))
+    else:
+        print(f"wrote {len(recs)} recording(s) x {args.frames} frames "
+              f"(gamma = {gamma * 1e6:.4g} pN s/um, dt = {dt * 1e3:.4g} ms) to {written[0]}")
+    return 0
+
+
+def design_command(args) -> int:
+    """``blurtrap design``: the recommended acquisition, printed (and plotted)."""
+    from .design import design
+
+    if len(args.k) not in (1, 2):
+        raise CliError(f"--k takes one stiffness or a range K_MIN K_MAX [pN/nm]; got {args.k}")
+    k = tuple(v * 1e-3 for v in args.k)
+    res = design(k=k[0] if len(k) == 1 else k,
+                 gamma=None if args.gamma is None else args.gamma * 1e-6,
+                 radius=None if args.radius_um is None else args.radius_um * 1e-6,
+                 viscosity=args.viscosity, temperature=args.temperature,
+                 max_fps=args.max_fps, min_exposure=args.min_exposure_ms * 1e-3,
+                 dead_time=args.dead_time_ms * 1e-3, n_frames=args.frames,
+                 total_time=args.total_s, tracking_std=args.tracking_nm * 1e-9,
+                 photon_limited=args.photon_limited, target=args.target,
+                 series=tuple(args.series))
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from .plotting import save
+
+        save(res.plot(), args.plot)
+    print(dumps_json(res.to_dict()) if args.json else res.summary())
+    return 0

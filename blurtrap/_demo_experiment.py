@@ -139,7 +139,7 @@ def add_drift(rec, seed: int):
 def naive_error_grid(cfg: DemoConfig, k_grid=None, w_grid=None):
     """Analytic relative error of naive equipartition, ``kT/var(X_m)/k - 1``, with
     ``var(X_m) = kT/k S(W k/gamma) + eps^2`` for the demo bead, over a k x W grid."""
-    from .plotting._common import blur_factor_np
+    from .plotting.internal import blur_factor_np
 
     k_grid = np.geomspace(5e-6, 2e-4, 40) if k_grid is None else np.asarray(k_grid, float)
     w_grid = np.geomspace(5e-5, 5e-3, 48) if w_grid is None else np.asarray(w_grid, float)

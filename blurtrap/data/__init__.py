@@ -8,10 +8,10 @@ importing this subpackage does not import jax itself (JAX arrays are accepted as
 instrument-file loaders import their optional dependencies (h5py, npTDMS) only when called.
 """
 
+from ._bluelake import load_bluelake as load_bluelake
 from ._csv import ExcludedRowsWarning as ExcludedRowsWarning
 from ._csv import infer_frame_interval as infer_frame_interval
 from ._csv import load_csv as load_csv
-from ._h5 import load_bluelake as load_bluelake
 from ._h5 import load_h5 as load_h5
 from ._instrument import INSTRUMENT_KEYS as INSTRUMENT_KEYS
 from ._instrument import instrument_settings as instrument_settings
@@ -19,7 +19,7 @@ from ._io import from_arrays as from_arrays
 from ._io import holds_xy as holds_xy
 from ._io import load as load
 from ._manifest import load_manifest as load_manifest
-from ._manifest import save_manifest as save_manifest
+from ._manifest_save import save_manifest as save_manifest
 from ._npz import load_npz as load_npz
 from ._npz import save_npz as save_npz
 from ._recording import Recording as Recording

@@ -300,22 +300,7 @@ def load_csv(
         }
     try:
         if frame_interval is None:
-            if times is None:
-                raise ValueError(
-                    f"frame_interval not given and there is no {TIME_COLUMN!r} column to "
-                    "infer it from; pass frame_interval [s]"
-                )
-            if times.shape[0] < 2:
-                raise ValueError(f"positions must hold at least 2 frames; got {times.shape[0]}")
-            frame_interval = infer_frame_interval(times, float(timing_tolerance))
-            meta["frame_interval_inferred"] = True
-            try:
-                w = float(exposure)
-            except (TypeError, ValueError):
-                w = math.nan
-            if frame_interval < w <= frame_interval * (1 + float(timing_tolerance)):
-                # time stamps cannot resolve the difference: the exposure fills the interval
-                frame_interval = w
+            frame_interval = _inferred_interval(times, exposure, timing_tolerance, meta)
         rec = Recording(
             positions,
             frame_interval=frame_interval,
@@ -353,6 +338,28 @@ def load_csv(
             stacklevel=2,
         )
     return rec
+
+
+def _inferred_interval(times, exposure, timing_tolerance, meta: dict) -> float:
+    """The frame interval [s] from the ``t_s`` column (noted in `meta`); an exposure just
+    above it, within the timing tolerance, is taken as the interval."""
+    if times is None:
+        raise ValueError(
+            f"frame_interval not given and there is no {TIME_COLUMN!r} column to "
+            "infer it from; pass frame_interval [s]"
+        )
+    if times.shape[0] < 2:
+        raise ValueError(f"positions must hold at least 2 frames; got {times.shape[0]}")
+    frame_interval = infer_frame_interval(times, float(timing_tolerance))
+    meta["frame_interval_inferred"] = True
+    try:
+        w = float(exposure)
+    except (TypeError, ValueError):
+        w = math.nan
+    if frame_interval < w <= frame_interval * (1 + float(timing_tolerance)):
+        # time stamps cannot resolve the difference: the exposure fills the interval
+        frame_interval = w
+    return frame_interval
 
 
 def write_csv(recording: Recording, path, position_unit: str = "nm", pixel_size_m=None) -> None:

@@ -120,6 +120,15 @@ def check_instrument(
     """
     v = {k: values[k] for k in INSTRUMENT_KEYS if values.get(k) is not None}
     out: dict[str, Any] = {}
+    _check_detector(v, where, out)
+    _check_bead(v, where, out, check_units)
+    _check_drive(v, where, out, has_stage, nyquist)
+    _check_inputs_and_ranges(v, where, out, nyquist)
+    return out
+
+
+def _check_detector(v: dict, where: str, out: dict) -> None:
+    """``detector``, ``anti_aliasing`` and ``diode_filter`` (validated into `out`)."""
     if "detector" in v:
         out["detector"] = _choice(where, "detector", v["detector"], DETECTORS)
     detector = out.get("detector")
@@ -160,6 +169,10 @@ def check_instrument(
                 f"'photodiode' (the filtering of a silicon photodiode); detector = {detector!r}. "
                 'Set "detector": "photodiode", or diode_filter "none"'
             )
+
+
+def _check_bead(v: dict, where: str, out: dict, check_units: bool) -> None:
+    """The bead and its fluid, and ``friction`` (validated into `out`)."""
     radius = None
     if "bead_radius_m" in v:
         radius = _positive(where, "bead_radius_m", v["bead_radius_m"], "m")
@@ -201,6 +214,10 @@ def check_instrument(
                 "Faxen's correction where distance_to_surface_m is given) and needs "
                 "bead_radius_m [m]"
             )
+
+
+def _check_drive(v: dict, where: str, out: dict, has_stage, nyquist) -> None:
+    """``drive`` (validated into `out`): below the Nyquist frequency, with stage positions."""
     if "drive" in v:
         d = _exact_keys(where, "drive", v["drive"], ("frequency_Hz",), 'e.g. {"frequency_Hz": 32}')
         f = _positive(where, "drive frequency_Hz", d["frequency_Hz"], "Hz")
@@ -215,6 +232,10 @@ def check_instrument(
                 "stage_nm (or stage_um, stage_m) column in the CSV, or Recording(stage=...) [m]"
             )
         out["drive"] = {"frequency_Hz": f}
+
+
+def _check_inputs_and_ranges(v: dict, where: str, out: dict, nyquist) -> None:
+    """The standard errors of the inputs and the frequency ranges (validated into `out`)."""
     for key, unit in INPUT_ERROR_KEYS.items():
         if key in v:
             err = _real(where, key, v[key], unit)
@@ -234,7 +255,6 @@ def check_instrument(
         out["excluded_ranges_Hz"] = [
             list(_range(where, f"excluded_ranges_Hz[{i}]", r, None)) for i, r in enumerate(ex)
         ]
-    return out
 
 
 def instrument_settings(recording) -> dict[str, Any]:

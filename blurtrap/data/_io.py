@@ -26,6 +26,41 @@ def _per_row(name: str, value, n: int) -> list:
     return list(arr.tolist()) if arr.dtype.kind in "iufb" else list(value)
 
 
+def _power(p):
+    """A laser power, with NaN read as unknown (None)."""
+    if p is None:
+        return None
+    try:
+        return None if math.isnan(float(p)) else p
+    except (TypeError, ValueError):
+        return p  # let Recording report it
+
+
+def _row_names(name, n: int) -> list:
+    """One name per row: ``name[i]`` for a str, the entries of a sequence, or None."""
+    if name is None or isinstance(name, str):
+        return [None if name is None else f"{name}[{i}]" for i in range(n)]
+    names = list(name)
+    if len(names) != n:
+        raise ValueError(f"name must have one entry per recording ({n}); got {len(names)}")
+    return names
+
+
+def _row_times(times, n: int) -> list:
+    """One time-stamp row (or None) per recording, from None, a shared 1-D or a 2-D array."""
+    if times is None:
+        return [None] * n
+    t = np.asarray(times)
+    if t.ndim == 1:
+        return [t] * n
+    if t.ndim == 2 and t.shape[0] == n:
+        return list(t)
+    raise ValueError(
+        f"times must be 1-D (shared) or 2-D with one row per recording ({n}); got "
+        f"shape {t.shape}"
+    )
+
+
 def from_arrays(
     positions,
     *,
@@ -73,15 +108,6 @@ def from_arrays(
     if unit != "m":
         meta["position_unit"] = unit
     pos = to_metres(raw, unit, px)
-
-    def power(p):
-        if p is None:
-            return None
-        try:
-            return None if math.isnan(float(p)) else p
-        except (TypeError, ValueError):
-            return p  # let Recording report it
-
     if raw.ndim == 1:
         return Recording(
             pos,
@@ -89,7 +115,7 @@ def from_arrays(
             exposure=exposure,
             temperature=temperature,
             times=times,
-            laser_power=power(laser_power),
+            laser_power=_power(laser_power),
             metadata=meta,
             name=name,
             allow_irregular=allow_irregular,
@@ -101,25 +127,8 @@ def from_arrays(
     ws = _per_row("exposure", exposure, n)
     temps = _per_row("temperature", temperature, n)
     powers = _per_row("laser_power", laser_power, n)
-    if name is None or isinstance(name, str):
-        names = [None if name is None else f"{name}[{i}]" for i in range(n)]
-    else:
-        names = list(name)
-        if len(names) != n:
-            raise ValueError(f"name must have one entry per recording ({n}); got {len(names)}")
-    if times is None:
-        trows = [None] * n
-    else:
-        t = np.asarray(times)
-        if t.ndim == 1:
-            trows = [t] * n
-        elif t.ndim == 2 and t.shape[0] == n:
-            trows = list(t)
-        else:
-            raise ValueError(
-                f"times must be 1-D (shared) or 2-D with one row per recording ({n}); got "
-                f"shape {t.shape}"
-            )
+    names = _row_names(name, n)
+    trows = _row_times(times, n)
     recs = []
     for i in range(n):
         try:
@@ -130,7 +139,7 @@ def from_arrays(
                     exposure=ws[i],
                     temperature=temps[i],
                     times=trows[i],
-                    laser_power=power(powers[i]),
+                    laser_power=_power(powers[i]),
                     metadata=meta,
                     name=names[i],
                     allow_irregular=allow_irregular,

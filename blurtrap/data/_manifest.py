@@ -14,21 +14,21 @@ stored in the recording's metadata under the same names (see :func:`instrument_s
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
-import re
 from decimal import Decimal
 from pathlib import Path
 from typing import Any
 
 from .._constants import DEFAULT_TEMPERATURE
-from ._csv import load_csv, write_csv
+from ._csv import load_csv
 from ._instrument import INSTRUMENT_KEYS, check_instrument
-from ._recording import DEFAULT_TIMING_TOLERANCE, Recording, thaw
+from ._recording import DEFAULT_TIMING_TOLERANCE
 from ._recording_set import RecordingSet
-from ._units import canonical_unit, check_pixel_size, decimal_text
-from ._xy import XYRecording, is_xy_csv, load_xy_csv, write_xy_csv
+from ._units import canonical_unit, check_pixel_size
+from ._xy import XYRecording, is_xy_csv, load_xy_csv
 
 _TOP_KEYS = (
     "position_unit",
@@ -54,6 +54,7 @@ _ENTRY_KEYS = (
 )
 _AXES = ("x", "xy")
 # metadata keys that the loaders set themselves; not written back by save_manifest
+# (``_manifest_save``)
 _LOADER_KEYS = ("source", "excluded_rows", "defaults_applied", "position_unit")
 
 
@@ -152,6 +153,23 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet | list[XY
     ``FileNotFoundError`` for a missing CSV.
     """
     path = Path(os.fspath(path))
+    doc = _read_doc(path)
+    unit, px = _position_unit(path, doc)
+    # manifest-level defaults for the entries that do not set them themselves
+    irregular_default = _flag(str(path), "allow_irregular", doc.get("allow_irregular", False))
+    top_instrument = {k: _plain(doc[k]) for k in INSTRUMENT_KEYS if k in doc}
+    entries = doc.get("recordings")
+    if not isinstance(entries, list) or not entries:
+        raise ValueError(f"{path}: 'recordings' must be a non-empty list of entries")
+    defaults = _Defaults(unit, px, irregular_default, top_instrument, on_bad_rows)
+    recs: list = [_load_entry(path, i, e, defaults) for i, e in enumerate(entries)]
+    _check_kinds(path, recs)
+    return recs if isinstance(recs[0], XYRecording) else RecordingSet(recs)
+
+
+def _read_doc(path: Path) -> dict:
+    """The manifest's JSON object (numbers as exact decimals), with clear errors for text
+    that is not UTF-8, empty, invalid or duplicated keys, and unknown top-level keys."""
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -184,6 +202,11 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet | list[XY
             f"{path}: 'description' must be a string (or null); got "
             f"{type(_plain(description)).__name__} {_plain(description)!r:.60}"
         )
+    return doc
+
+
+def _position_unit(path: Path, doc: dict) -> tuple[str, float | None]:
+    """The manifest's position unit and pixel size (for ``px``)."""
     if "position_unit" not in doc:
         raise ValueError(f'{path}: \'position_unit\' is missing (e.g. "position_unit": "nm")')
     px_given = (
@@ -194,226 +217,122 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet | list[XY
         px = check_pixel_size(unit, px_given)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
-    # manifest-level defaults for the entries that do not set them themselves
-    irregular_default = _flag(str(path), "allow_irregular", doc.get("allow_irregular", False))
-    top_instrument = {k: _plain(doc[k]) for k in INSTRUMENT_KEYS if k in doc}
-    entries = doc.get("recordings")
-    if not isinstance(entries, list) or not entries:
-        raise ValueError(f"{path}: 'recordings' must be a non-empty list of entries")
-
-    recs = []
-    for i, e in enumerate(entries):
-        where = f"{path}, recordings[{i}]"
-        if not isinstance(e, dict):
-            raise ValueError(f"{where}: each entry must be a JSON object; got {e!r}")
-        unknown = sorted(set(e) - set(_ENTRY_KEYS))
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; allowed: {list(_ENTRY_KEYS)}")
-        for key in ("file", "exposure_s"):
-            if key not in e:
-                raise ValueError(f"{where}: required key {key!r} is missing")
-        if not isinstance(e["file"], str) or not e["file"]:
-            raise ValueError(f"{where}: 'file' must be a file name; got {e['file']!r}")
-        csv_path = path.parent / e["file"]
-        shown = e["file"] if len(e["file"]) <= 80 else e["file"][:77] + "..."
-        where = f"{where} ({shown})"
-        try:
-            found = csv_path.is_file()
-        except (OSError, ValueError) as err:  # e.g. a name too long for the file system
-            raise ValueError(f"{where}: cannot use this file name ({err})") from None
-        if not found:
-            raise FileNotFoundError(f"{where}: file not found: {csv_path}")
-        kw = {}
-        defaults = {}
-        kw["exposure"] = _number(where, "exposure_s", e["exposure_s"])
-        if "frame_interval_s" in e:
-            kw["frame_interval"] = _number(where, "frame_interval_s", e["frame_interval_s"])
-        if "temperature_K" in e:
-            kw["temperature"] = _number(where, "temperature_K", e["temperature_K"])
-        else:
-            kw["temperature"] = DEFAULT_TEMPERATURE
-            defaults["temperature_K"] = DEFAULT_TEMPERATURE
-        if e.get("laser_power_mW") is not None:
-            kw["laser_power"] = _number(where, "laser_power_mW", e["laser_power_mW"], 3)
-        meta = e.get("metadata", {})
-        if not isinstance(meta, dict):
-            raise ValueError(f"{where}: 'metadata' must be a JSON object; got {meta!r}")
-        meta = _plain(meta)
-        twice = sorted(k for k in INSTRUMENT_KEYS if k in e and k in meta)
-        if twice:
-            raise ValueError(
-                f"{where}: {twice} given both as entry key(s) and in 'metadata'; give each once"
-            )
-        inherited = sorted(k for k in top_instrument if k not in e and k not in meta)
-        instrument = {k: top_instrument[k] for k in inherited}
-        instrument.update({k: _plain(e[k]) for k in INSTRUMENT_KEYS if k in e})
-        instrument.update({k: meta[k] for k in INSTRUMENT_KEYS if k in meta})
-        where_i = where + (f", with the top-level default(s) {inherited}" if inherited else "")
-        fi = kw.get("frame_interval", math.nan)
-        nyquist = 0.5 / fi if 0 < fi < math.inf else None
-        units_checked = e.get("check_units", True) is not False
-        meta.update(check_instrument(instrument, where_i, nyquist=nyquist, check_units=units_checked))
-        meta["manifest"] = str(path)
-        if defaults:
-            meta["defaults_applied"] = defaults
-        name = e.get("name", Path(e["file"]).stem)
-        kw["allow_irregular"] = _flag(
-            where, "allow_irregular", e.get("allow_irregular", irregular_default)
-        )
-        kw["check_units"] = _flag(where, "check_units", e.get("check_units", True))
-        kw["timing_tolerance"] = _number(
-            where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))
-        )
-        axes = _entry_axes(where, e, csv_path)
-        loader = load_xy_csv if axes == "xy" else load_csv
-        try:
-            rec = loader(
-                csv_path,
-                position_unit=unit,
-                pixel_size_m=px,
-                on_bad_rows=on_bad_rows,
-                name=name,
-                metadata=meta,
-                **kw,
-            )
-        except ValueError as err:
-            raise ValueError(f"{path}, recordings[{i}]: {err}") from None
-        # what needs the data: the stage column of a drive, the Nyquist frequency
-        check_instrument(
-            instrument,
-            where_i,
-            has_stage=getattr(rec, "stage", None) is not None,
-            nyquist=0.5 / rec.frame_interval,
-            check_units=units_checked,
-        )
-        recs.append(rec)
-    _check_kinds(path, recs)
-    return recs if isinstance(recs[0], XYRecording) else RecordingSet(recs)
+    return unit, px
 
 
-def _safe_stem(name: str | None, i: int) -> str:
-    if not name:
-        return f"recording_{i:03d}"
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or f"recording_{i:03d}"
-    return stem
+@dataclasses.dataclass(frozen=True)
+class _Defaults:
+    """What the manifest's top level sets for every entry."""
+
+    unit: str
+    px: float | None
+    allow_irregular: bool
+    instrument: dict
+    on_bad_rows: str
 
 
-def _items(recordings) -> list:
-    """Recording / XYRecording / RecordingSet / a sequence of either kind -> a list."""
-    if isinstance(recordings, (Recording, XYRecording)):
-        return [recordings]
-    if isinstance(recordings, RecordingSet):
-        return list(recordings)
-    items = list(recordings)
-    if any(isinstance(r, XYRecording) for r in items):
-        for i, r in enumerate(items):
-            if not isinstance(r, XYRecording):
-                raise TypeError(f"save_manifest: item {i} is a {type(r).__name__} among x/y "
-                                f"recordings; a manifest holds one kind (XYRecording or "
-                                f"Recording): save them in two manifests")
-        return items
-    return list(RecordingSet(items))
+def _entry_file(path: Path, i: int, e) -> tuple[str, Path]:
+    """The entry's place for messages and its CSV path, after the key checks."""
+    where = f"{path}, recordings[{i}]"
+    if not isinstance(e, dict):
+        raise ValueError(f"{where}: each entry must be a JSON object; got {e!r}")
+    unknown = sorted(set(e) - set(_ENTRY_KEYS))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; allowed: {list(_ENTRY_KEYS)}")
+    for key in ("file", "exposure_s"):
+        if key not in e:
+            raise ValueError(f"{where}: required key {key!r} is missing")
+    if not isinstance(e["file"], str) or not e["file"]:
+        raise ValueError(f"{where}: 'file' must be a file name; got {e['file']!r}")
+    csv_path = path.parent / e["file"]
+    shown = e["file"] if len(e["file"]) <= 80 else e["file"][:77] + "..."
+    where = f"{where} ({shown})"
+    try:
+        found = csv_path.is_file()
+    except (OSError, ValueError) as err:  # e.g. a name too long for the file system
+        raise ValueError(f"{where}: cannot use this file name ({err})") from None
+    if not found:
+        raise FileNotFoundError(f"{where}: file not found: {csv_path}")
+    return where, csv_path
 
 
-def save_manifest(
-    recordings,
-    path,
-    position_unit: str | None = None,
-    *,
-    pixel_size_m=None,
-) -> list[Path]:
-    """Write a manifest JSON at ``path`` and one CSV per recording next to it.
+def _entry_numbers(where: str, e: dict) -> tuple[dict, dict]:
+    """Loader keywords from the entry's acquisition numbers, and the defaults applied."""
+    kw = {}
+    defaults = {}
+    kw["exposure"] = _number(where, "exposure_s", e["exposure_s"])
+    if "frame_interval_s" in e:
+        kw["frame_interval"] = _number(where, "frame_interval_s", e["frame_interval_s"])
+    if "temperature_K" in e:
+        kw["temperature"] = _number(where, "temperature_K", e["temperature_K"])
+    else:
+        kw["temperature"] = DEFAULT_TEMPERATURE
+        defaults["temperature_K"] = DEFAULT_TEMPERATURE
+    if e.get("laser_power_mW") is not None:
+        kw["laser_power"] = _number(where, "laser_power_mW", e["laser_power_mW"], 3)
+    return kw, defaults
 
-    `position_unit`: the unit of the CSV files' positions; None (default): ``"V"`` for
-    recordings in volts, else ``"nm"`` (a manifest has one unit: volts and metres cannot be
-    mixed). The instrument keys of the metadata are written as entry keys and a recording's
-    stage as a ``stage_nm`` column. `recordings` may also be an :class:`XYRecording` or a
-    list of them: each is written as ``t_s,x_<unit>,y_<unit>`` with ``"axes": "xy"`` (a
-    length unit or V; not px).
 
-    CSV names come from the recording names (made file-system safe and unique), else
-    ``recording_000.csv``, ... Positions are written as exact decimals in `position_unit`
-    and times with repr precision, so :func:`load_manifest` gives back identical float64
-    values (for ``px`` only to within a rounding). Existing files are overwritten.
-
-    **Returns:** the paths written (manifest first).
-    """
-    recordings = _items(recordings)
-    in_volts = {r.position_unit == "V" for r in recordings}
-    if len(in_volts) > 1:
+def _entry_instrument(where: str, e: dict, top: dict) -> tuple[dict, dict, str]:
+    """The entry's metadata, its instrument settings (entry keys, ``metadata`` and the
+    top-level defaults) and the place for messages naming the defaults used."""
+    meta = e.get("metadata", {})
+    if not isinstance(meta, dict):
+        raise ValueError(f"{where}: 'metadata' must be a JSON object; got {meta!r}")
+    meta = _plain(meta)
+    twice = sorted(k for k in INSTRUMENT_KEYS if k in e and k in meta)
+    if twice:
         raise ValueError(
-            "save_manifest: some recordings are in volts and others in metres; a manifest has "
-            "one position_unit: save them in two manifests"
+            f"{where}: {twice} given both as entry key(s) and in 'metadata'; give each once"
         )
-    if position_unit is None:
-        position_unit = "V" if in_volts == {True} else "nm"
-    unit = canonical_unit(position_unit)
-    if (unit == "V") != (in_volts == {True}):
-        raise ValueError(
-            f"save_manifest: position_unit = {position_unit!r} but the recordings are in "
-            f"{'volts' if in_volts == {True} else 'metres'}; pass "
-            f"{'V' if in_volts == {True} else 'a length unit (nm, um, m, ...)'} or None"
+    inherited = sorted(k for k in top if k not in e and k not in meta)
+    instrument = {k: top[k] for k in inherited}
+    instrument.update({k: _plain(e[k]) for k in INSTRUMENT_KEYS if k in e})
+    instrument.update({k: meta[k] for k in INSTRUMENT_KEYS if k in meta})
+    where_i = where + (f", with the top-level default(s) {inherited}" if inherited else "")
+    return meta, instrument, where_i
+
+
+def _load_entry(path: Path, i: int, e, top: _Defaults):
+    """One manifest entry -> a Recording (or XYRecording), every key checked."""
+    where, csv_path = _entry_file(path, i, e)
+    kw, defaults = _entry_numbers(where, e)
+    meta, instrument, where_i = _entry_instrument(where, e, top.instrument)
+    fi = kw.get("frame_interval", math.nan)
+    nyquist = 0.5 / fi if 0 < fi < math.inf else None
+    units_checked = e.get("check_units", True) is not False
+    meta.update(check_instrument(instrument, where_i, nyquist=nyquist, check_units=units_checked))
+    meta["manifest"] = str(path)
+    if defaults:
+        meta["defaults_applied"] = defaults
+    name = e.get("name", Path(e["file"]).stem)
+    kw["allow_irregular"] = _flag(
+        where, "allow_irregular", e.get("allow_irregular", top.allow_irregular)
+    )
+    kw["check_units"] = _flag(where, "check_units", e.get("check_units", True))
+    kw["timing_tolerance"] = _number(
+        where, "timing_tolerance", e.get("timing_tolerance", Decimal(str(DEFAULT_TIMING_TOLERANCE)))
+    )
+    axes = _entry_axes(where, e, csv_path)
+    loader = load_xy_csv if axes == "xy" else load_csv
+    try:
+        rec = loader(
+            csv_path,
+            position_unit=top.unit,
+            pixel_size_m=top.px,
+            on_bad_rows=top.on_bad_rows,
+            name=name,
+            metadata=meta,
+            **kw,
         )
-    px = check_pixel_size(unit, pixel_size_m)
-    path = Path(os.fspath(path))
-    folder = path.parent
-    used: set[str] = set()
-    entries = []
-    decimals: dict[str, str] = {}
-    written = [path]
-    for i, r in enumerate(recordings):
-        stem = _safe_stem(r.name, i)
-        fname, k = f"{stem}.csv", 1
-        while fname.lower() in used or (folder / fname).resolve() == path.resolve():
-            fname, k = f"{stem}_{k}.csv", k + 1
-        used.add(fname.lower())
-        xy = isinstance(r, XYRecording)
-        if xy:
-            if unit == "px":
-                raise ValueError("save_manifest: x/y recordings are written in a length unit "
-                                 "or V; position_unit = 'px' is not supported for them")
-            write_xy_csv(r, folder / fname, unit)
-            name, r = r.name, r.x  # the acquisition settings are shared by both axes
-        else:
-            write_csv(r, folder / fname, unit, px)
-            name = r.name
-        written.append(folder / fname)
-        entry: dict = {
-            "file": fname,
-            "frame_interval_s": r.frame_interval,
-            "exposure_s": r.exposure,
-            "temperature_K": r.temperature,
-        }
-        if r.laser_power is not None:
-            token = f"@@DECIMAL{i}@@"
-            decimals[token] = decimal_text(Decimal(repr(r.laser_power)).scaleb(3))
-            entry["laser_power_mW"] = token
-        # always written: a missing name would come back as the file stem (null stays None)
-        entry["name"] = name
-        if xy:
-            entry["axes"] = "xy"
-        plain = thaw(r.metadata)
-        assert isinstance(plain, dict)  # thaw maps a mapping to a dict
-        for k in INSTRUMENT_KEYS:
-            if plain.get(k) is not None:
-                entry[k] = plain[k]
-        skip = (*_LOADER_KEYS, "manifest", *INSTRUMENT_KEYS)
-        meta = {k: v for k, v in plain.items() if k not in skip}
-        if meta:
-            entry["metadata"] = meta
-        if r.allow_irregular:
-            entry["allow_irregular"] = True
-        if r.timing_tolerance != DEFAULT_TIMING_TOLERANCE:
-            entry["timing_tolerance"] = r.timing_tolerance
-        if not r.check_units:
-            entry["check_units"] = False
-        entries.append(entry)
-    doc: dict = {"position_unit": unit}
-    if unit == "px":
-        doc["pixel_size_m"] = px
-    doc["recordings"] = entries
-    text = json.dumps(doc, indent=1, ensure_ascii=False)
-    for token, dec in decimals.items():
-        text = text.replace(f'"{token}"', dec)
-    path.write_text(text + "\n", encoding="utf-8", newline="\n")
-    return written
+    except ValueError as err:
+        raise ValueError(f"{path}, recordings[{i}]: {err}") from None
+    # what needs the data: the stage column of a drive, the Nyquist frequency
+    check_instrument(
+        instrument,
+        where_i,
+        has_stage=getattr(rec, "stage", None) is not None,
+        nyquist=0.5 / rec.frame_interval,
+        check_units=units_checked,
+    )
+    return rec

@@ -11,7 +11,7 @@ import numpy as np
 
 from ._units import canonical_unit
 from ._values import fmt_g as _g
-from ._values import numeric_array
+from ._values import numeric_array, scalar
 
 # Heuristic unit-slip thresholds (disabled with check_units=False).
 # Frame interval / exposure: trap calibrations are recorded by cameras at ~20 frames/s to
@@ -225,3 +225,67 @@ def check_stage(stage, n: int, check_units: bool) -> np.ndarray:
             "stage_um is converted), or check_units=False"
         )
     return arr
+
+
+def check_acquisition(frame_interval, exposure, temperature, laser_power, timing_tolerance,
+                      check_units: bool):
+    """The acquisition settings of :class:`Recording` as floats ``(dt, W, T, P, timing
+    tolerance)``, each checked (positive, W <= dt, and with `check_units` plausible in SI:
+    not ms, Celsius or mW)."""
+    dt = scalar("frame_interval", frame_interval, "s")
+    if dt <= 0:
+        raise ValueError(f"frame_interval must be > 0 [s]; got frame_interval = {dt!r}")
+    if check_units and dt >= _MAX_PLAUSIBLE_INTERVAL_S:
+        raise ValueError(in_ms_message("frame_interval", dt))
+    w = scalar("exposure", exposure, "s")
+    if w <= 0:
+        raise ValueError(f"exposure must be > 0 [s]; got exposure = {w!r}")
+    if check_units and w >= _MAX_PLAUSIBLE_INTERVAL_S:
+        raise ValueError(in_ms_message("exposure", w))
+    if w > dt:
+        raise ValueError(
+            f"exposure = {w!r} s is longer than frame_interval = {dt!r} s; a frame cannot "
+            "integrate longer than the time between frames (expected exposure <= "
+            "frame_interval)"
+        )
+    temp = _check_temperature(temperature, check_units)
+    if laser_power is None:
+        power = None
+    else:
+        power = scalar("laser_power", laser_power, "W")
+        if power < 0:
+            raise ValueError(f"laser_power must be >= 0 [W]; got laser_power = {power!r}")
+        if check_units and power > _MAX_PLAUSIBLE_LASER_POWER_W:
+            raise ValueError(
+                f"laser_power = {power!r} W is above 10 W: this looks like mW, not W "
+                f"(did you mean {power * 1e-3!r} W?). Pass watts, or check_units=False"
+            )
+    tol = scalar("timing_tolerance", timing_tolerance, "1")
+    if not tol > 0:
+        raise ValueError(f"timing_tolerance must be > 0; got {tol!r}")
+    return dt, w, temp, power, tol
+
+
+def _check_temperature(temperature, check_units: bool) -> float:
+    """The temperature [K]; with `check_units`, Celsius and millikelvin are caught."""
+    temp = scalar("temperature", temperature, "K")
+    if temp <= 0:
+        raise ValueError(f"temperature must be > 0 [K]; got temperature = {temp!r}")
+    if check_units and temp < _MIN_PLAUSIBLE_TEMPERATURE_K:
+        raise ValueError(
+            f"temperature = {temp!r} K is below 100 K: this looks like Celsius; pass "
+            f"kelvin (e.g. {temp + 273.15:.2f} K), or check_units=False"
+        )
+    if check_units and temp > _MAX_PLAUSIBLE_TEMPERATURE_K:
+        as_mk = 1e3 * _MIN_PLAUSIBLE_TEMPERATURE_K <= temp <= 1e3 * _MAX_PLAUSIBLE_TEMPERATURE_K
+        hint = (
+            f"this looks like millikelvin (did you mean {temp * 1e-3:.6g} K?)"
+            if as_mk
+            else "no trapping experiment in liquid water runs this hot (water boils at "
+            "373 K)"
+        )
+        raise ValueError(
+            f"temperature = {temp!r} K is above 400 K: {hint}. Expected kelvin between "
+            "100 and 400 K; pass kelvin, or check_units=False"
+        )
+    return temp

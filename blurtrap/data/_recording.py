@@ -20,14 +20,30 @@ from ._plausible import _MAX_PLAUSIBLE_POSITION_STD_M as _MAX_PLAUSIBLE_POSITION
 from ._plausible import _MAX_PLAUSIBLE_TEMPERATURE_K as _MAX_PLAUSIBLE_TEMPERATURE_K
 from ._plausible import _MIN_PLAUSIBLE_POSITION_STD_M as _MIN_PLAUSIBLE_POSITION_STD_M
 from ._plausible import _MIN_PLAUSIBLE_TEMPERATURE_K as _MIN_PLAUSIBLE_TEMPERATURE_K
-from ._plausible import RECORDING_UNITS, check_positions, check_stage, declared_unit, in_ms_message
+from ._plausible import RECORDING_UNITS, check_acquisition, check_positions, check_stage, declared_unit
 from ._timing import DEFAULT_TIMING_TOLERANCE as DEFAULT_TIMING_TOLERANCE
 from ._timing import TimingJitter as TimingJitter
 from ._timing import check_times
 from ._values import fmt_g as _g
-from ._values import freeze, scalar
+from ._values import freeze
 from ._values import numeric_array as numeric_array
 from ._values import thaw as thaw
+
+
+def _metadata(metadata, dtype_note, unit) -> dict:
+    """The recording's metadata as a plain dict, with the input dtype and volts noted."""
+    if metadata is not None and not isinstance(metadata, (dict, types.MappingProxyType)):
+        raise ValueError(
+            f"metadata must be a dict (or None); got {type(metadata).__name__} {metadata!r:.60}"
+        )
+    frozen = freeze({} if metadata is None else metadata)
+    assert isinstance(frozen, types.MappingProxyType)  # _freeze maps a dict to a mapping proxy
+    meta = dict(frozen)
+    if dtype_note is not None:
+        meta.setdefault("input_dtype", dtype_note)
+    if unit == "V":
+        meta["position_unit"] = "V"
+    return meta
 
 
 class Recording:
@@ -108,70 +124,13 @@ class Recording:
         )
         stage_arr = None if stage is None else check_stage(stage, pos.shape[0], check_units)
 
-        dt = scalar("frame_interval", frame_interval, "s")
-        if dt <= 0:
-            raise ValueError(f"frame_interval must be > 0 [s]; got frame_interval = {dt!r}")
-        if check_units and dt >= _MAX_PLAUSIBLE_INTERVAL_S:
-            raise ValueError(in_ms_message("frame_interval", dt))
-        w = scalar("exposure", exposure, "s")
-        if w <= 0:
-            raise ValueError(f"exposure must be > 0 [s]; got exposure = {w!r}")
-        if check_units and w >= _MAX_PLAUSIBLE_INTERVAL_S:
-            raise ValueError(in_ms_message("exposure", w))
-        if w > dt:
-            raise ValueError(
-                f"exposure = {w!r} s is longer than frame_interval = {dt!r} s; a frame cannot "
-                "integrate longer than the time between frames (expected exposure <= "
-                "frame_interval)"
-            )
-        temp = scalar("temperature", temperature, "K")
-        if temp <= 0:
-            raise ValueError(f"temperature must be > 0 [K]; got temperature = {temp!r}")
-        if check_units and temp < _MIN_PLAUSIBLE_TEMPERATURE_K:
-            raise ValueError(
-                f"temperature = {temp!r} K is below 100 K: this looks like Celsius; pass "
-                f"kelvin (e.g. {temp + 273.15:.2f} K), or check_units=False"
-            )
-        if check_units and temp > _MAX_PLAUSIBLE_TEMPERATURE_K:
-            as_mk = 1e3 * _MIN_PLAUSIBLE_TEMPERATURE_K <= temp <= 1e3 * _MAX_PLAUSIBLE_TEMPERATURE_K
-            hint = (
-                f"this looks like millikelvin (did you mean {temp * 1e-3:.6g} K?)"
-                if as_mk
-                else "no trapping experiment in liquid water runs this hot (water boils at "
-                "373 K)"
-            )
-            raise ValueError(
-                f"temperature = {temp!r} K is above 400 K: {hint}. Expected kelvin between "
-                "100 and 400 K; pass kelvin, or check_units=False"
-            )
-        if laser_power is None:
-            power = None
-        else:
-            power = scalar("laser_power", laser_power, "W")
-            if power < 0:
-                raise ValueError(f"laser_power must be >= 0 [W]; got laser_power = {power!r}")
-            if check_units and power > _MAX_PLAUSIBLE_LASER_POWER_W:
-                raise ValueError(
-                    f"laser_power = {power!r} W is above 10 W: this looks like mW, not W "
-                    f"(did you mean {power * 1e-3!r} W?). Pass watts, or check_units=False"
-                )
-        tol = scalar("timing_tolerance", timing_tolerance, "1")
-        if not tol > 0:
-            raise ValueError(f"timing_tolerance must be > 0; got {tol!r}")
+        dt, w, temp, power, tol = check_acquisition(
+            frame_interval, exposure, temperature, laser_power, timing_tolerance, check_units
+        )
         if name is not None and not isinstance(name, str):
             raise ValueError(f"name must be a str or None; got {name!r}")
 
-        if metadata is not None and not isinstance(metadata, (dict, types.MappingProxyType)):
-            raise ValueError(
-                f"metadata must be a dict (or None); got {type(metadata).__name__} {metadata!r:.60}"
-            )
-        frozen = freeze({} if metadata is None else metadata)
-        assert isinstance(frozen, types.MappingProxyType)  # _freeze maps a dict to a mapping proxy
-        meta = dict(frozen)
-        if dtype_note is not None:
-            meta.setdefault("input_dtype", dtype_note)
-        if unit == "V":
-            meta["position_unit"] = "V"
+        meta = _metadata(metadata, dtype_note, unit)
         if times is None:
             t, jitter = None, None
         else:

@@ -21,8 +21,7 @@ import numpy as np
 import optimistix as optx
 
 from .._config import float64_scope
-from ..physics import BOLTZMANN
-from ..physics._effects import water_viscosity
+from ..physics import BOLTZMANN, water_viscosity
 from ._fisher import whittle_information
 
 TARGETS = ("k", "gamma", "both")
@@ -69,7 +68,7 @@ class DesignResult:
     def plot(self, ax=None):
         """Predicted SE against exposure and frame interval, candidates marked
         (:func:`blurtrap.plotting.design_se`; imports matplotlib). Returns the figure."""
-        from ..plotting._design import design_se
+        from ..plotting import design_se
 
         return design_se(self, ax=ax)
 
@@ -191,6 +190,32 @@ def _check(name, value, lo=0.0, unit=""):
     return float(value)
 
 
+def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time: float,
+               budget: float, by_time: bool) -> Acquisition | None:
+    """The best series of ``n_exp`` exposures at a common frame interval, from a few starts
+    (None when no start gives a finite objective)."""
+    ks, gamma, temperature, eps_ref2, w_ref, photon_limited, target = common
+    prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
+                    dead=jnp.asarray(dead_time),
+                    budget=jnp.asarray(budget),
+                    ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
+                    temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
+                    w_ref=jnp.asarray(w_ref), n_exp=n_exp,
+                    total_time=by_time, photon_limited=photon_limited,
+                    target=target)
+    spread = np.linspace(-2.0, 2.0, n_exp) if n_exp > 1 else np.zeros(1)
+    starts = np.array([np.concatenate([[u0], spread + s0]) for u0 in (-6.0, 0.0, 2.0)
+                       for s0 in (-2.0, 2.0)])
+    us, vals = _minimise_all(prob, jnp.asarray(starts))
+    vals = np.asarray(vals)
+    if not np.isfinite(vals).any():
+        return None
+    best_u = us[int(np.argmin(vals))]
+    label = "optimised single recording" if n_exp == 1 else \
+        f"optimised series of {n_exp} exposures"
+    return _acquisition(label, prob.recs(best_u), *common)
+
+
 @float64_scope
 def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 295.0,
            max_fps: float, min_exposure: float = 1e-6, dead_time: float = 0.0,
@@ -273,25 +298,10 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     for n_exp in series:
         if isinstance(n_exp, bool) or not isinstance(n_exp, (int, np.integer)) or n_exp < 1:
             raise ValueError(f"series must hold whole numbers of exposures >= 1; got {n_exp!r}")
-        prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
-                        dead=jnp.asarray(float(dead_time)),
-                        budget=jnp.asarray(float(budget)),
-                        ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
-                        temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
-                        w_ref=jnp.asarray(w_ref), n_exp=int(n_exp),
-                        total_time=total_time is not None, photon_limited=bool(photon_limited),
-                        target=target)
-        spread = np.linspace(-2.0, 2.0, n_exp) if n_exp > 1 else np.zeros(1)
-        starts = np.array([np.concatenate([[u0], spread + s0]) for u0 in (-6.0, 0.0, 2.0)
-                           for s0 in (-2.0, 2.0)])
-        us, vals = _minimise_all(prob, jnp.asarray(starts))
-        vals = np.asarray(vals)
-        if not np.isfinite(vals).any():
-            continue
-        best_u = us[int(np.argmin(vals))]
-        label = "optimised single recording" if n_exp == 1 else \
-            f"optimised series of {n_exp} exposures"
-        cands.append(_acquisition(label, prob.recs(best_u), *common))
+        best = _optimised(int(n_exp), common, dt_min, w_min, float(dead_time), float(budget),
+                          total_time is not None)
+        if best is not None:
+            cands.append(best)
     cands.sort(key=lambda c: c.objective)  # unidentified designs (objective inf) last
     if not math.isfinite(cands[0].objective):
         raise ValueError("no candidate design identifies both k and gamma under these "

@@ -10,9 +10,7 @@ otherwise (or say nothing) the note says which key to set.
 
 from __future__ import annotations
 
-from ..inference._calibrate import calibrate
-from ..inference._models import TrapModel
-from ..inference._result import FitError
+from ..inference import FitError, TrapModel, calibrate
 
 #: log-likelihood difference that names one detector model over the other
 DETECTOR_DLOGL = 10.0

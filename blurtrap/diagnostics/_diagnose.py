@@ -34,12 +34,9 @@ import dataclasses
 import numpy as np
 
 from .._config import float64_scope
-from ..inference._calibrate import calibrate
-from ..inference._frames import _inspect_frames
-from ..inference._instrument import default_model
-from ..inference._models import get_model
-from ..inference._recordings import as_recordings
-from ..inference._result import FitError
+from ..inference import FitError, calibrate, get_model
+from ..inference.internal import as_recordings, default_model
+from ..inference.internal import inspect_frames as _inspect_frames
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
 from ._detector import detector_note
 from ._evidence import _ADDING, _gof_change, _sensitivity_notes

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from ..inference._result import CalibrationResult
-from ..physics._effects import water_viscosity
+from ..inference import CalibrationResult
+from ..physics import water_viscosity
 
 
 def _bands(fit: CalibrationResult):

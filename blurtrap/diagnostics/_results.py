@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from ..inference._fit_inputs import html_table
-from ..inference._result import CalibrationResult
+from ..inference import CalibrationResult
+from ..inference.internal import html_table
 
 _COLUMNS = ("effect", "delta_loglik", "dof", "delta_aic", "p_value", "significant",
             "plausible", "evidence")

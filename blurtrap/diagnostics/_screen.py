@@ -13,7 +13,7 @@ and the final refit of a significant candidate evaluates the same spectrum.
 from __future__ import annotations
 
 from .._config import float64_scope
-from ..inference._ml_fits import screen_model
+from ..inference.internal import screen_model
 
 
 @float64_scope

@@ -3,9 +3,8 @@ repeat) and the comparison of two fits of the same data (:func:`compare`)."""
 
 from __future__ import annotations
 
-from ..inference._models import get_model
-from ..inference._recordings import as_recordings
-from ..inference._result import CalibrationResult
+from ..inference import CalibrationResult, get_model
+from ..inference.internal import as_recordings
 from ._candidates import _check_alpha, _check_candidates
 from ._diagnose import diagnose
 from ._results import Selection

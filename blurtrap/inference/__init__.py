@@ -7,9 +7,15 @@ from ._allan import AllanVariance as AllanVariance
 from ._allan import allan_variance as allan_variance
 from ._anharmonic import AnharmonicResult as AnharmonicResult
 from ._anharmonic import calibrate_anharmonic as calibrate_anharmonic
-from ._batch import BatchCalibration as BatchCalibration
 from ._batch import calibrate_batch as calibrate_batch
+from ._batch_result import BatchCalibration as BatchCalibration
 from ._calibrate import calibrate as calibrate
+from ._drift import (
+    drift_extrapolation as drift_extrapolation,
+)
+from ._drift import (
+    highpass_variance_curve as highpass_variance_curve,
+)
 from ._fit import FitOutput as FitOutput
 from ._fit import fit_ml as fit_ml
 from ._likelihood import (
@@ -64,13 +70,7 @@ from ._result import FitError as FitError
 from ._starts import moment_start as moment_start
 from ._stored import fit_psd as fit_psd
 from ._variance import (
-    drift_extrapolation as drift_extrapolation,
-)
-from ._variance import (
     empirical_variance_se as empirical_variance_se,
-)
-from ._variance import (
-    highpass_variance_curve as highpass_variance_curve,
 )
 from ._xy import XYCalibration as XYCalibration
 from ._xy import calibrate_xy as calibrate_xy

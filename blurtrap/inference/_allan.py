@@ -20,12 +20,12 @@ import jax.scipy.linalg as jsl
 import numpy as np
 import optimistix as optx
 
-from ..physics._allan import (
+from .._constants import BOLTZMANN
+from ..physics import (
     allan_from_moments,
     allan_variance_model,
     frame_moments,
 )
-from ..physics._constants import BOLTZMANN
 from ._problems import Layout, RecMeta
 
 

@@ -301,7 +301,7 @@ def _rd_from_drive(values, names, drive, model):
     blur = abs(float(np.sinc(f_d * w))) if model.blur else 1.0
     t = 1.0
     if "f3db" in names:
-        from ..physics._effects import photodiode_transfer
+        from ..physics import photodiode_transfer
 
         t = math.sqrt(float(photodiode_transfer(f_d, values[names.index("f3db")],
                                                 values[names.index("diode_alpha")])))

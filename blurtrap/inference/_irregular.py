@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics._constants import BOLTZMANN
+from .._constants import BOLTZMANN
 from ._models import TrapModel
 from ._problems import Layout, RecMeta, bucket_length, rec_meta
 

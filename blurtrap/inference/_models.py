@@ -31,11 +31,13 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._constants import BOLTZMANN
 from ..effects import EFFECTS, AbstractEffect, make_effect
-from ..physics._blur import _blur_factor, _rho_b
-from ..physics._constants import BOLTZMANN
-from ..physics._effects import fold_sum, water_viscosity
-from ..physics._spectra import _expected_block_periodogram, _psd_coeffs
+from ..physics import blur_factor_unchecked as _blur_factor
+from ..physics import expected_block_periodogram_unchecked as _expected_block_periodogram
+from ..physics import fold_sum, water_viscosity
+from ..physics import psd_coeffs_unchecked as _psd_coeffs
+from ..physics import rho_b_unchecked as _rho_b
 from ._nodes import N_NODES, folded_on_nodes, use_nodes
 
 _FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}

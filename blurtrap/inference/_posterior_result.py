@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..physics._constants import BOLTZMANN
+from .._constants import BOLTZMANN
 from ._fit_inputs import html_table
 from ._result import DESCRIBE, LAB, CalibrationResult, Parameter
 

@@ -91,7 +91,7 @@ def _bead_radii(recs) -> list:
 
 def _stokes_notes(recs, radii, res) -> list:
     """A note when the fitted gamma is far from Stokes' 6 pi eta r of the known bead."""
-    from ..physics._effects import water_viscosity
+    from ..physics import water_viscosity
 
     g = float(res.gamma)
     if not (math.isfinite(g) and g > 0) or res.method == "equipartition":

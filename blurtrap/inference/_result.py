@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from .._constants import BOLTZMANN
 from ..effects import QUANTITIES
-from ..physics._constants import BOLTZMANN
 
 #: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
 Z95 = 1.959963984540054
@@ -217,14 +217,14 @@ class CalibrationResult:
         """Blocked spectrum of the fitted recordings with the fitted model (and the naive
         Lorentzian where the model blurs or folds): :func:`blurtrap.plotting.fit_spectrum`.
         Returns the figure; ``ValueError`` for a result rebuilt from JSON (no recordings)."""
-        from ..plotting._result_figs import fit_spectrum
+        from ..plotting import fit_spectrum
 
         return fit_spectrum(self, n_blocks=n_blocks, ax=ax)
 
     def plot_residuals(self, ax=None, *, n_blocks=None):
         """Data/model of the blocked spectrum with its expected 68 % and 95 % bands:
         :func:`blurtrap.plotting.fit_residuals`. Returns the figure."""
-        from ..plotting._result_figs import fit_residuals
+        from ..plotting import fit_residuals
 
         return fit_residuals(self, n_blocks=n_blocks, ax=ax)
 

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import float64_scope
-from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
+from .._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 from ._fit import fit_ml
 from ._models import get_model
 from ._problems import SpectralArgs, make_layout, rec_meta, spectral_model_psd, spectral_nll

@@ -19,7 +19,8 @@ from ._result import LAB as _LAB_UNITS
 from ._result import CalibrationResult, FitError
 from ._spectral import _psd_jit, _spectral_args
 from ._starts import _start_vector
-from ._variance import VarianceArgs, empirical_variance_se, fit_variances, profile_intervals
+from ._variance import VarianceArgs, empirical_variance_se, fit_variances
+from ._variance_profile import profile_intervals
 
 
 def _joint_likelihood_se(recs, layout, model, p):
@@ -148,7 +149,7 @@ def _equipartition(recs, diffusion, pade):
             ks.append(k)
             kerr.append(k * se / v)
         else:
-            from ..physics._blur import stiffness_from_variance
+            from ..physics import stiffness_from_variance
 
             meth = "pade" if pade else "exact"
             k = float(stiffness_from_variance(v, diffusion, float(r.exposure), float(r.temperature),

@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..physics._constants import BOLTZMANN
-from ..physics._spectra import _psd_coeffs
+from .._constants import BOLTZMANN
+from ..physics import psd_coeffs_unchecked as _psd_coeffs
 
 
 class _RationalWhittleArgs(eqx.Module):
@@ -172,7 +172,7 @@ def _leakage(p, a: _RationalWhittleArgs) -> float:
     """``max_r u0_r sqrt(N_r)`` at ``p``: ``u0 = 2 C(1) / (N num(0))`` is the relative
     leakage term ``E[I_j]/P_d(f_j) - 1`` of the expected periodogram at low frequency
     (``~ rho tau / T``)."""
-    from ..physics._blur import _rho_b
+    from ..physics import rho_b_unchecked as _rho_b
 
     q = _rational_parts(jnp.asarray(p), a)
     k_rec, gamma, _ = a.layout.unpack(jnp.asarray(p))

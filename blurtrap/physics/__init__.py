@@ -3,21 +3,29 @@
 Imports nothing else of blurtrap. SI units throughout.
 """
 
+from ._allan import allan_from_moments as allan_from_moments
 from ._allan import allan_variance_model as allan_variance_model
+from ._allan import frame_moments as frame_moments
 from ._blur import (
     blur_factor as blur_factor,
 )
 from ._blur import (
     blur_factor_pade as blur_factor_pade,
 )
+from ._blur import blur_factor_unchecked as blur_factor_unchecked
 from ._blur import (
     measured_variance as measured_variance,
 )
+from ._blur import rho_b_unchecked as rho_b_unchecked
 from ._blur import (
     stiffness_from_variance as stiffness_from_variance,
 )
 from ._constants import BOLTZMANN as BOLTZMANN
 from ._constants import DEFAULT_TEMPERATURE as DEFAULT_TEMPERATURE
+from ._effects import drift_psd as drift_psd
+from ._effects import fold_sum as fold_sum
+from ._effects import line_psd as line_psd
+from ._effects import photodiode_transfer as photodiode_transfer
 from ._hydro import POLYSTYRENE_DENSITY as POLYSTYRENE_DENSITY
 from ._hydro import WATER_TEMPERATURE_RANGE as WATER_TEMPERATURE_RANGE
 from ._hydro import brenner_factor as brenner_factor
@@ -58,16 +66,25 @@ from ._spectra import (
     discrete_psd_unchecked as discrete_psd_unchecked,
 )
 from ._spectra import (
+    expected_block_periodogram_unchecked as expected_block_periodogram_unchecked,
+)
+from ._spectra import (
     frame_autocovariance as frame_autocovariance,
 )
 from ._spectra import (
     lorentzian as lorentzian,
 )
 from ._spectra import (
+    psd_coeffs_unchecked as psd_coeffs_unchecked,
+)
+from ._spectra import (
     psd_measured as psd_measured,
 )
 from ._spectra import (
     sample_variance_se as sample_variance_se,
+)
+from ._spectra import (
+    sample_variance_var_unchecked as sample_variance_var_unchecked,
 )
 from ._spectra import (
     transfer_rect as transfer_rect,

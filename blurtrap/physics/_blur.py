@@ -239,3 +239,9 @@ def stiffness_from_variance(
     u, dw = jnp.broadcast_arrays(u, dw)
     alpha = _inverse_s_over_alpha(u / dw)
     return alpha * kt / dw
+
+
+# Unchecked kernels shared with the estimators (``blurtrap.inference``), whose optimisers need
+# them without input checks (trial points may be extreme); public under these names.
+blur_factor_unchecked = _blur_factor  # S(alpha) for alpha >= 0, no checks
+rho_b_unchecked = _rho_b  # rho B(alpha) with rho = exp(-r), r = dt/tau >= alpha, no checks

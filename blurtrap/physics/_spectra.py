@@ -274,3 +274,10 @@ def autocovariance_unchecked(lag, sigma2, tau, exposure, frame_interval, trackin
     """The frame autocovariance C(lag) [m^2] without input checks (see
     :func:`discrete_psd_unchecked`)."""
     return _autocovariance(lag, sigma2, tau, exposure, frame_interval, tracking_var)
+
+
+# Unchecked kernels shared with the estimators (see :func:`discrete_psd_unchecked`); public
+# under these names, in the trap's natural parameters (sigma2 [m^2], tau [s]).
+psd_coeffs_unchecked = _psd_coeffs  # frequency-independent coefficients of the discrete PSD
+expected_block_periodogram_unchecked = _expected_block_periodogram  # E[periodogram of M frames]
+sample_variance_var_unchecked = _sample_variance_var  # var(s^2) of N frames (DESIGN item 10)

@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from .._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 from ..effects import lab_units
-from ..physics._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -188,7 +188,7 @@ def blocked_psd(recording, n_blocks=None):
     """Blocked periodogram exactly as ``calibrate(method="psd")`` computes it.
 
     Returns ``(f [Hz], two-sided P [m^2/Hz], n_blocks)``."""
-    from ..inference._spectral import _np_periodogram
+    from ..inference.internal import np_periodogram as _np_periodogram
 
     n = recording.n_frames
     nb = n_blocks if n_blocks is not None else max(1, min(128, n // 64))

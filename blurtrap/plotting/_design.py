@@ -22,7 +22,7 @@ def _single_se(result, exposures, intervals):
     import jax
     import jax.numpy as jnp
 
-    from ..design._fisher import whittle_information
+    from ..design import whittle_information
 
     s = result.settings
     eps_ref2 = float(s["tracking_std_m"]) ** 2

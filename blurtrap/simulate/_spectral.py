@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ..physics._effects import hydro_lorentzian, photodiode_transfer
+from ..physics import hydro_lorentzian, photodiode_transfer
 
 N_ALIAS = 128
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
