@@ -12,6 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .._config import float64_scope, warn_if_float32
 from .._constants import BOLTZMANN, DEFAULT_TEMPERATURE
@@ -80,6 +81,8 @@ def calibrate_batch(
     n_blocks: int = 1,
     check_units: bool = True,
     gof_threshold: float = GOF_THRESHOLD,
+    progress: bool = False,
+    shard: bool | str = "auto",
 ) -> BatchCalibration:
     """Calibrate each row of ``positions`` (shape (B, N), metres) in one vmapped call.
 
@@ -121,12 +124,19 @@ def calibrate_batch(
     (empty, every row NaN/inf or constant) raises ``ValueError``: there is nothing to
     calibrate.
 
+    - `progress`: a tqdm bar over the chunks of 64 rows (per device) as their fits finish.
+    - `shard`: ``"auto"`` (default) splits each chunk's rows over all local devices when
+      there are several (``jax.sharding``, one compiled program; estimates and errors are
+      those of one device bit for bit, goodness-of-fit p-values to rounding), ``True``
+      the same, ``False`` one device.
+
     **Returns:** :class:`BatchCalibration` with per-item values, errors, ``status``,
     ``success`` (status ``"ok"``), ``gof_p``, ``lag1_z`` and ``at_bound`` (an "ok" item
     with eps^2 held at 0, whose other errors are conditional on it and can be far too
     small).
     """
     warn_if_float32("positions", positions)
+    mesh = _batch_mesh(shard)
     y, m, gof_threshold = _check_batch(positions, n_blocks, check_units, gof_threshold)
     b, n = y.shape
     mdl = get_model(model)
@@ -136,9 +146,10 @@ def calibrate_batch(
     f, per, nbin, shared = _shared_args(mdl, dt, w, t, m, n_blocks)
     n_par = len(shared.layout.names)
     acq = (dt, w, t)
-    pending, stats, pre = _fit_chunks(y, shared, acq, n_blocks, m, bool(check_units), per, nbin)
+    pending, stats, pre = _fit_chunks(y, shared, acq, n_blocks, m, bool(check_units), per, nbin,
+                                      mesh)
     skip = pre != ""
-    fits = _collect(pending, b, n_par)
+    fits = _collect(pending, b, n_par, progress)
     val, cov, success, converged, pd, steps, gof = fits
     for i in np.flatnonzero(~success & ~skip):  # rare: refit alone (Newton, then BFGS)
         _refit_alone(i, y, shared, acq, n_blocks, m, bool(check_units), per, nbin, fits)
@@ -225,15 +236,37 @@ def _shared_args(mdl, dt, w, t, m, n_blocks):
     return f, per, nbin, shared
 
 
-def _fit_chunks(y, shared: SpectralArgs, acq, n_blocks, m, check_units: bool, per, nbin):
+def _batch_mesh(shard):
+    """A one-axis mesh over the local devices (``shard`` "auto"/True with several), or None."""
+    if not (isinstance(shard, (bool, np.bool_)) or (isinstance(shard, str) and shard == "auto")):
+        raise ValueError(f"shard must be 'auto', True or False; got shard = {shard!r}")
+    devices = jax.local_devices()
+    if shard is False or len(devices) < 2:
+        return None
+    return Mesh(np.asarray(devices), ("batch",))
+
+
+def _rows_on(mesh):
+    """Put a chunk's (rows, ...) array on the device(s): rows split over the mesh, if any."""
+    if mesh is None:
+        return jnp.asarray
+    sharding = NamedSharding(mesh, PartitionSpec("batch"))
+    return lambda z: jax.device_put(np.asarray(z), sharding)
+
+
+def _fit_chunks(y, shared: SpectralArgs, acq, n_blocks, m, check_units: bool, per, nbin,
+                mesh=None):
     """Dispatch the vmapped fits chunk by chunk (``acq = (dt, W, T)``): ``(pending fits,
     per-row checks (B, 6), status of rows not fitted)``."""
     b = y.shape[0]
     (dt, w, t), noise = acq, shared.model.noise
-    # Chunks of at most _CHUNK rows: one compiled shape for every large batch, host memory
-    # bounded by the chunk, and the host-side periodograms of the next chunk overlap with
-    # the (asynchronously dispatched) jitted fit of the previous one.
-    chunk = min(b, _CHUNK)
+    # Chunks of at most _CHUNK rows per device: one compiled shape for every large batch,
+    # host memory bounded by the chunk, and the host-side periodograms of the next chunk
+    # overlap with the (asynchronously dispatched) jitted fit of the previous one. With a
+    # mesh, a chunk is a multiple of the device count and its rows are split over them.
+    n_dev = 1 if mesh is None else mesh.size
+    chunk = -(-min(b, _CHUNK * n_dev) // n_dev) * n_dev
+    put = _rows_on(mesh)
     pending = []
     stats = np.empty((b, 6))
     pre = np.empty(b, dtype=object)
@@ -248,14 +281,18 @@ def _fit_chunks(y, shared: SpectralArgs, acq, n_blocks, m, check_units: bool, pe
         if pad:
             power, starts, log_ref = (np.concatenate([z, np.repeat(z[:1], pad, axis=0)])
                                       for z in (power, starts, log_ref))
-        pending.append((i0, i1, _batch_fit(jnp.asarray(starts), jnp.asarray(power[:, None, :]),
-                                           jnp.asarray(log_ref), shared, per, nbin)))
+        pending.append((i0, i1, _batch_fit(put(starts), put(power[:, None, :]), put(log_ref),
+                                           shared, per, nbin)))
     return pending, stats, pre
 
 
-def _collect(pending, b: int, n_par: int):
+def _collect(pending, b: int, n_par: int, progress: bool = False):
     """The chunks' fits on the host: ``(value, cov, success, converged, hessian_pd,
-    n_steps, goodness-of-fit numbers)``, one row per item."""
+    n_steps, goodness-of-fit numbers)``, one row per item; a tqdm bar with `progress`."""
+    if progress:
+        from tqdm.auto import tqdm
+
+        pending = tqdm(pending, desc="calibrate_batch", unit="chunk", mininterval=0.0)
     val, cov = np.empty((b, n_par)), np.empty((b, n_par, n_par))
     success, converged, pd = (np.empty(b, dtype=bool) for _ in range(3))
     steps = np.empty(b, dtype=int)
