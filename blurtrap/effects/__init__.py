@@ -44,6 +44,9 @@ EFFECTS: dict[str, type[AbstractEffect]] = {}
 #: every quantity by name: core parameters, effect parameters, derived quantities
 QUANTITIES: dict[str, Param] = {}
 
+#: names bound in this namespace by discover() (classes not imported above)
+_BOUND: set[str] = set()
+
 
 def _module_effect(module) -> type[AbstractEffect]:
     """The one effect class a module defines (with a non-empty canonical ``name``)."""
@@ -74,7 +77,13 @@ def discover() -> dict[str, type[AbstractEffect]]:
             raise ValueError(f"effect name {cls.name!r} is defined twice: by "
                              f"{classes[cls.name].__module__} and {cls.__module__}")
         classes[cls.name] = cls
-        globals().setdefault(cls.__name__, cls)
+    for stale in _BOUND - {c.__name__ for c in classes.values()}:
+        globals().pop(stale, None)
+        _BOUND.discard(stale)
+    for cls in classes.values():
+        if cls.__name__ not in globals():
+            globals()[cls.__name__] = cls
+            _BOUND.add(cls.__name__)
     EFFECTS.clear()
     EFFECTS.update(sorted(classes.items(), key=lambda kv: (kv[1].order, kv[0])))
     QUANTITIES.clear()
