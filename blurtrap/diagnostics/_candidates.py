@@ -32,7 +32,7 @@ COUPLED_GROUPS = {"motion_blur+aliasing": (("motion_blur", "aliasing"), 85.0)}
 
 def valid_candidates() -> tuple[str, ...]:
     """Every name ``candidates`` may hold: the registered effects and the coupled groups."""
-    return tuple(EFFECTS) + tuple(COUPLED_GROUPS)
+    return tuple(n for n, c in EFFECTS.items() if c.diagnose_test) + tuple(COUPLED_GROUPS)
 
 
 def candidate_name(c) -> str:
@@ -65,8 +65,8 @@ def _check_candidates(candidates):
                          f"effect objects; got {candidates!r}") from None
     items = [c.name if isinstance(c, type) and issubclass(c, AbstractEffect) else c
              for c in items]
-    bad = [c for c in items if not isinstance(c, AbstractEffect)
-           and (not isinstance(c, str) or c not in valid)]
+    bad = [c for c in items if (c not in valid if isinstance(c, str)
+                                else not (isinstance(c, AbstractEffect) and c.diagnose_test))]
     if bad:
         raise ValueError(f"candidates: unknown effect name(s) or object(s) {bad}; valid names "
                          f"are {list(valid)}, or effect objects from blurtrap.effects")

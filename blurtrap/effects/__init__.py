@@ -32,6 +32,7 @@ from .laser_heating import LaserHeating as LaserHeating
 from .line_noise import LineNoise as LineNoise
 from .motion_blur import MotionBlur as MotionBlur
 from .power_offset import PowerOffset as PowerOffset
+from .stage_drive import StageDrive as StageDrive
 from .timing_jitter import TimingJitter as TimingJitter
 from .tracking_noise import TrackingNoise as TrackingNoise
 
@@ -116,8 +117,7 @@ def lab_units(name: str) -> tuple[float, str]:
 
 __all__ = [
     "EFFECTS", "QUANTITIES", "AbstractEffect", "Aliasing", "Anharmonicity", "DataContext",
-    "DetectorFilter",
-    "Drift", "ExposureKernel", "Hydrodynamics", "LaserHeating", "LineNoise", "MotionBlur",
-    "Param", "PowerOffset", "StartContext", "TimingJitter", "TrackingNoise", "lab_units",
-    "discover", "injections", "make_effect", "value_field",
+    "DetectorFilter", "Drift", "ExposureKernel", "Hydrodynamics", "LaserHeating", "LineNoise",
+    "MotionBlur", "Param", "PowerOffset", "StageDrive", "StartContext", "TimingJitter",
+    "TrackingNoise", "discover", "injections", "lab_units", "make_effect", "value_field",
 ]

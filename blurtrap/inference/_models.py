@@ -78,6 +78,11 @@ class TrapModel(eqx.Module):
                     f"effect {eff.name!r} ({eff.kind}) is not part of the Gaussian likelihood; "
                     "diagnose() tests it from the frame histogram / time stamps"
                 )
+            if eff.kind == "input":
+                raise ValueError(
+                    f"effect {eff.name!r} is a known input, not part of the model: calibrate "
+                    "fits it from the recording's instrument setting (e.g. drive)"
+                )
             model = dataclasses.replace(model, name=f"{model.name}+{eff.name}",
                                         extra=model.extra + (eff,))
         return model

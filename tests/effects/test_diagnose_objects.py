@@ -43,7 +43,8 @@ def test_candidates_mix_names_classes_and_objects():
     assert got == ["line_noise", "drift"]  # one entry per name, the first one kept
     assert _check_candidates(DRIFT) == [DRIFT]
     assert _check_candidates([DRIFT, "drift"])[0] is DRIFT
-    for bad in (["no_such_effect"], [3.0], [bt.RandomWalkDrift(1e-16)]):
+    for bad in (["no_such_effect"], [3.0], [bt.RandomWalkDrift(1e-16)], ["stage_drive"],
+                [fx.StageDrive(amplitude=1e-7)]):
         with pytest.raises(ValueError, match="candidates: unknown effect name.*or object"):
             bt.diagnose(bt.Recording(np.arange(8.0) * 1e-9, frame_interval=DT,
                                      exposure=DT), candidates=bad)

@@ -14,10 +14,10 @@ import blurtrap.effects as fx
 from blurtrap.diagnostics._candidates import default_candidates
 from blurtrap.inference import get_model
 
-#: DESIGN section 3 (stage_drive is a known input handled by calibrate's drive option)
+#: DESIGN section 3
 CANONICAL = {"motion_blur", "aliasing", "tracking_noise", "drift", "exposure_kernel",
              "detector_filter", "hydrodynamics", "anharmonicity", "laser_heating",
-             "power_offset", "line_noise", "timing_jitter"}
+             "power_offset", "line_noise", "timing_jitter", "stage_drive"}
 
 TOY = '''
 """A toy effect for the registry test: extra white noise after the detector."""

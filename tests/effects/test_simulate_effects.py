@@ -29,6 +29,8 @@ CASES = {
                       dict(method="spectral")),
     "exposure_kernel": ([fx.ExposureKernel(rise_fraction=0.5)],
                         dict(exposure_profile=bt.TrapezoidProfile(0.5)), dict(substeps=8)),
+    "stage_drive": ([fx.StageDrive(amplitude=5e-8, frequency=40.0)],
+                    dict(injections=(inj.StageDrive(5e-8, 40.0),)), {}),
     # mixed: effects are appended after the injections, in order
     "mixed": ([fx.TrackingNoise(tracking_var=V), fx.LineNoise(line_amplitude=A)],
               dict(injections=(inj.RandomWalkDrift(D), inj.TrackingNoise(np.sqrt(V)),

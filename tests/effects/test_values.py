@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from blurtrap import effects as fx
+from blurtrap.diagnostics._candidates import valid_candidates
 from blurtrap.effects import injections as inj
 from blurtrap.inference import get_model
 
@@ -23,6 +24,7 @@ FIELDS = [
     (fx.ExposureKernel, "rise_fraction", 0.25, [0.6, -0.01], "in [0, 0.5]"),
     (fx.PowerOffset, "power_offset", 1e-3, [-1e-3], ">= 0 W"),
     (fx.LaserHeating, "heating", 10.0, [-2.0], ">= 0 K/W"),
+    (fx.StageDrive, "amplitude", 1e-7, [-1e-7], ">= 0 m"),
 ]
 
 
@@ -76,6 +78,8 @@ def test_model_keeps_structure_not_values():
     (fx.Hydrodynamics(hydro_radius=1e-6, distance=5e-6),
      inj.HydrodynamicFriction(1e-6, distance=5e-6)),
     (fx.ExposureKernel(rise_fraction=0.25), inj.TrapezoidProfile(0.25)),
+    (fx.StageDrive(amplitude=1e-7, frequency=28.0, phase=0.5, mode="additive"),
+     inj.StageDrive(1e-7, 28.0, 0.5, "additive")),
 ])
 def test_to_injection_builds_the_simulators_injection(effect, expected):
     got = effect.to_injection()
@@ -109,3 +113,13 @@ def test_scalar_needed_where_the_simulator_takes_a_scalar():
 def test_effects_that_cannot_be_simulated_say_so(effect, hint):
     with pytest.raises(ValueError, match=rf"effect '{effect.name}' .*cannot be simulated.*{hint}"):
         effect.to_injection()
+
+
+def test_stage_drive_is_a_known_input_not_a_model_piece():
+    with pytest.raises(ValueError, match="'stage_drive' is a known input, not part of the model"):
+        get_model("standard+stage_drive")
+    with pytest.raises(ValueError, match="mode must be 'fluid' or 'additive'; got mode = 'x'"):
+        fx.StageDrive(mode="x")
+    with pytest.raises(ValueError, match="frequency must be a finite number > 0 Hz"):
+        fx.StageDrive(frequency=0.0)
+    assert "stage_drive" not in valid_candidates()  # diagnose never proposes it
