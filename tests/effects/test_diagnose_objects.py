@@ -72,3 +72,16 @@ def test_default_candidates_come_from_the_classes(recs, model, k, multi, expecte
     kernel for a blurred model over several exposures, relations for linear_power over >= 3
     powers, timing_jitter with time stamps), in signal-chain order."""
     assert default_candidates(recs, get_model(model), k, multi) == expected
+
+
+def test_object_values_start_the_screening_fit():
+    """A candidate object's positive scalar values replace the start of its own parameters;
+    zero, arrays and other effects' parameters are left out."""
+    from blurtrap.diagnostics._candidates import _object_start
+
+    warm = {"k": 5e-5, "gamma": 2.7e-8}
+    start = _object_start(warm, (fx.Drift(drift_diffusion=3e-16),
+                                 fx.LineNoise(line_amplitude=0.0),
+                                 fx.TrackingNoise(tracking_var=[1e-18, 2e-18]), "aliasing"))
+    assert start == {**warm, "drift_diffusion": 3e-16}
+    assert warm == {"k": 5e-5, "gamma": 2.7e-8}  # not modified
