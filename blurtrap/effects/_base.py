@@ -163,10 +163,15 @@ class AbstractEffect(eqx.Module):
                              *f.metadata[_VALUE])
 
     # ---- values ------------------------------------------------------------------------
-    def values(self) -> dict[str, np.ndarray]:
-        """The given parameter values by name (SI float64 arrays; unknown ones left out)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-                if _VALUE in f.metadata and getattr(self, f.name) is not None}
+    def values(self) -> dict[str, Any]:
+        """The given parameter values by name, SI (a float for a scalar, else a float64 array;
+        unknown ones left out): ``calibrate(..., start=e.values())`` or ``fixed=e.values()``."""
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if _VALUE in f.metadata and v is not None:
+                out[f.name] = float(v) if np.ndim(v) == 0 else v
+        return out
 
     def without_values(self) -> AbstractEffect:
         """The same effect with every value unknown (what a model keeps: its structure)."""

@@ -31,6 +31,17 @@ def test_hidden_effect_found_with_the_same_object(drifting):
     assert "drift_diffusion" in best.fit.param_names
 
 
+def test_object_values_start_or_fix_calibrate(drifting):
+    """The model drops the values; calibrate takes them as start or as fixed values."""
+    assert DRIFT.values() == {"drift_diffusion": 2e-16}
+    fixed = bt.calibrate(drifting, model=bt.TrapModel() + DRIFT, method="likelihood",
+                         likelihood="whittle", fixed=DRIFT.values())
+    assert fixed.params["drift_diffusion"] == 2e-16
+    started = bt.calibrate(drifting, model="standard+drift", method="likelihood",
+                           likelihood="whittle", start=DRIFT.values())
+    assert started.params["drift_diffusion"] != 2e-16 and started.k > 0
+
+
 def test_select_model_adds_the_object(drifting):
     sel = bt.select_model(drifting, candidates=[DRIFT], max_steps=1)
     assert sel.added == ("drift",) and sel.model.has("drift")
