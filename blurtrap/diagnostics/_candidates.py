@@ -1,33 +1,43 @@
-"""The candidate effects of :func:`diagnose`: the vocabulary, argument checks, the default
-candidate list for a model and its data, and how each candidate is tested (a screening refit
-with a likelihood-ratio test, or a direct test for effects outside the Gaussian likelihood)."""
+"""The candidate effects of :func:`diagnose`: argument checks, the default candidate list for a
+model and its data, and how each candidate is tested (a screening refit with a likelihood-ratio
+test, or a direct test for effects outside the Gaussian likelihood).
+
+What a candidate is and how it is tested comes from the effect classes themselves
+(:data:`blurtrap.effects.EFFECTS`): ``applies`` (does it apply to these recordings and this
+model), ``diagnose_test`` (``"likelihood"``, ``"line"``, ``"kurtosis"``, ``"timestamps"``) and
+``order``. Only the coupled groups, which concern pairs of effects, are listed here.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from ..inference._fit import chi2_sf
-from ..inference._result import FitError
+from ..effects import EFFECTS, AbstractEffect, DataContext, make_effect
+from ..inference import FitError
+from ..inference.internal import chi2_sf
 from ._evidence import _evidence, _gof_change, _kurtosis_test, _line_candidate, _plausible
 from ._results import Candidate
 from ._screen import screen
 
-SPECTRAL_CANDIDATES = ("motion_blur", "aliasing", "tracking_noise", "drift", "line_noise",
-                       "exposure_kernel", "detector_filter", "hydrodynamics")
-RELATION_CANDIDATES = ("power_offset", "laser_heating")
-_CORE_FLAGS = ("motion_blur", "aliasing", "tracking_noise")
 #: Physically coupled effects tried together when the model lacks all of them: a camera both
 #: blurs (exposure average) and samples (folding). From the naive model each alone makes the
 #: fit worse (blur removes high-frequency power that only the folded spectrum gives back), so
-#: a one-at-a-time search would never find the pair.
-COUPLED_GROUPS = {"motion_blur+aliasing": ("motion_blur", "aliasing")}
+#: a one-at-a-time search would never find the pair. Value: (members, place in the default
+#: list, in the effects' ``order``).
+COUPLED_GROUPS = {"motion_blur+aliasing": (("motion_blur", "aliasing"), 85.0)}
 
 
-#: every name ``candidates`` may hold
-VALID_CANDIDATES = SPECTRAL_CANDIDATES + RELATION_CANDIDATES + ("anharmonicity",
-                                                                 "timing_jitter") + tuple(COUPLED_GROUPS)
+def valid_candidates() -> tuple[str, ...]:
+    """Every name ``candidates`` may hold: the registered effects and the coupled groups."""
+    return tuple(n for n, c in EFFECTS.items() if c.diagnose_test) + tuple(COUPLED_GROUPS)
+
+
+def candidate_name(c) -> str:
+    """The name of a candidate (a name or an effect object)."""
+    return c.name if isinstance(c, AbstractEffect) else c
 
 
 def _check_alpha(alpha) -> float:
@@ -41,44 +51,51 @@ def _check_alpha(alpha) -> float:
 
 
 def _check_candidates(candidates):
+    """A list of unique candidates: canonical names (or coupled groups) and effect objects
+    (an effect class counts as its name)."""
     if candidates is None:
         return None
-    if isinstance(candidates, str):
+    if isinstance(candidates, (str, AbstractEffect)):
         candidates = [candidates]
+    valid = valid_candidates()
     try:
-        names = list(candidates)
+        items = list(candidates)
     except TypeError:
-        raise ValueError(f"candidates must be a list of effect names from "
-                         f"{list(VALID_CANDIDATES)}; got {candidates!r}") from None
-    bad = [c for c in names if c not in VALID_CANDIDATES]
+        raise ValueError(f"candidates must be a list of effect names from {list(valid)} or "
+                         f"effect objects; got {candidates!r}") from None
+    items = [c.name if isinstance(c, type) and issubclass(c, AbstractEffect) else c
+             for c in items]
+    bad = [c for c in items if (c not in valid if isinstance(c, str)
+                                else not (isinstance(c, AbstractEffect) and c.diagnose_test))]
     if bad:
-        raise ValueError(f"candidates: unknown effect name(s) {bad}; valid names are "
-                         f"{list(VALID_CANDIDATES)}")
-    return list(dict.fromkeys(names))
+        raise ValueError(f"candidates: unknown effect name(s) or object(s) {bad}; valid names "
+                         f"are {list(valid)}, or effect objects from blurtrap.effects")
+    out: dict = {}
+    for c in items:
+        out.setdefault(candidate_name(c), c)
+    return list(out.values())
+
+
+def data_context(recs, mdl, k: str, multi_power: bool) -> DataContext:
+    """What the effects' ``applies`` hooks see of the recordings and the model."""
+    return DataContext(
+        sampling_rate=1.0 / float(np.median([float(r.frame_interval) for r in recs])),
+        n_exposures=len({float(r.exposure) for r in recs}), blurred=bool(mdl.blur), k_mode=k,
+        multi_power=multi_power, has_times=any(r.times is not None for r in recs))
 
 
 def default_candidates(recs, mdl, k: str, multi_power: bool) -> list[str]:
-    """Every applicable effect not in ``mdl``: the spectral ones (detector_filter and
-    hydrodynamics only at photodiode rates, >= 10 kHz; exposure_kernel only for a blurred
-    model over several exposures), the coupled groups, the power relations (``k =
-    "linear_power"`` over >= 3 powers), anharmonicity, and timing_jitter when there are time
-    stamps."""
-    fs = 1.0 / float(np.median([float(r.frame_interval) for r in recs]))
-    fast = fs >= 10_000.0
-    candidates = [c for c in SPECTRAL_CANDIDATES if not mdl.has(c)]
-    if not fast:
-        candidates = [c for c in candidates if c not in ("detector_filter", "hydrodynamics")]
-    if not mdl.blur or len({float(r.exposure) for r in recs}) < 2:
-        # one exposure: the kernel shape is absorbed by k, gamma, eps^2 (exact ARMA(1,1))
-        candidates = [c for c in candidates if c != "exposure_kernel"]
-    candidates += [g for g, members in COUPLED_GROUPS.items()
-                   if not any(mdl.has(e) for e in members)]
-    if multi_power and k == "linear_power":
-        candidates += [c for c in RELATION_CANDIDATES if not mdl.has(c)]
-    candidates += ["anharmonicity"]
-    if any(r.times is not None for r in recs):
-        candidates += ["timing_jitter"]
-    return candidates
+    """Every effect not in ``mdl`` that ``applies`` to the data (its class's hook: e.g.
+    detector_filter and hydrodynamics only at photodiode rates, exposure_kernel only for a
+    blurred model over several exposures, the power relations for ``k = "linear_power"`` over
+    >= 3 powers, timing_jitter with time stamps), plus the coupled groups none of whose members
+    is in the model, in the effects' ``order``."""
+    ctx = data_context(recs, mdl, k, multi_power)
+    entries = [(cls.order, name) for name, cls in EFFECTS.items()
+               if cls.diagnose_test and not mdl.has(name) and cls.applies(ctx)]
+    entries += [(order, g) for g, (members, order) in COUPLED_GROUPS.items()
+                if not any(mdl.has(e) for e in members)]
+    return [name for _, name in sorted(entries, key=lambda e: e[0])]
 
 
 def _anharmonicity_candidate(recs, base) -> Candidate:
@@ -117,12 +134,13 @@ def _lr_p_value(dll: float, dof: int) -> float:
     return p
 
 
-def _screen(recs, mdl, k, name: str, config: dict, warm: dict):
-    """Screening refit of ``mdl`` + ``name`` (warm start; core effects also from the
-    closed-form start, keeping the better optimum). Returns the model and the optimum."""
-    test_model = mdl.add(*COUPLED_GROUPS.get(name, (name,)), **config)
+def _screen(recs, mdl, k, name: str, effects: tuple, warm: dict):
+    """Screening refit of ``mdl`` + ``effects`` (warm start; flag effects, which can move k
+    and gamma far, also from the closed-form start, keeping the better optimum). Returns the
+    model and the optimum."""
+    test_model = mdl.add(*effects)
     params, nll1, gof1, ok = screen(recs, test_model, k, start=warm)
-    if name in _CORE_FLAGS or name in COUPLED_GROUPS:
+    if name in COUPLED_GROUPS or EFFECTS[name].kind == "flag":
         # adding a core effect can move k and gamma far from the misspecified base
         # fit: also try the closed-form start and keep the better optimum
         cold = screen(recs, test_model, k, start=None)
@@ -131,28 +149,48 @@ def _screen(recs, mdl, k, name: str, config: dict, warm: dict):
     return test_model, params, nll1, gof1, ok
 
 
-def _likelihood_candidate(recs, mdl, k, base, name: str, warm: dict):
-    """Refit with ``name`` added and test it by the likelihood ratio against ``base``.
-    Returns the :class:`Candidate` and the screening optimum (``None`` when the refit
-    failed)."""
-    config = {}
-    p_line = None
-    if name == "line_noise":
-        f0, p_line, r_line = _line_candidate(base)
-        T = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
-        config = {"frequency": f0, "width": 1.0 / T}
+def _candidate_effects(recs, base, name: str, effect):
+    """The effect objects to add for candidate ``name`` (given as ``effect``, an object, or
+    by name) and, for a ``"line"`` test, the searched line ``(frequency, p, ratio)``."""
+    if name in COUPLED_GROUPS:
+        return tuple(COUPLED_GROUPS[name][0]), None
+    eff = effect if isinstance(effect, AbstractEffect) else make_effect(name)
+    if EFFECTS[name].diagnose_test != "line":
+        return (eff,), None
+    f0, p_line, r_line = _line_candidate(base)
+    T = float(np.median([r.n_frames * float(r.frame_interval) for r in recs]))
+    return (dataclasses.replace(eff, frequency=f0, width=1.0 / T),), (f0, p_line, r_line)
+
+
+def _object_start(warm: dict, effects: tuple) -> dict:
+    """The warm start with the candidate objects' own positive scalar values."""
+    start = dict(warm)
+    for e in effects:
+        if isinstance(e, AbstractEffect):
+            names = {p.name for p in e.params}
+            start.update({n: float(v) for n, v in e.values().items()
+                          if n in names and np.ndim(v) == 0 and v > 0})
+    return start
+
+
+def _likelihood_candidate(recs, mdl, k, base, name: str, warm: dict, effect=None):
+    """Refit with ``name`` (or the object ``effect``) added and test it by the likelihood
+    ratio against ``base``. Returns the :class:`Candidate` and the screening optimum
+    (``None`` when the refit failed)."""
+    effects, line = _candidate_effects(recs, base, name, effect)
     try:
-        test_model, params, nll1, gof1, ok = _screen(recs, mdl, k, name, config, warm)
+        test_model, params, nll1, gof1, ok = _screen(recs, mdl, k, name, effects,
+                                                     _object_start(warm, effects))
     except (FitError, ValueError) as exc:
         return Candidate(name, None, 0, 1.0, None, f"refit failed: {exc}"), None
     dof = len(params) - len(base.param_names)
     dll = float(base.extras["nll"] - nll1)
     p = _lr_p_value(dll, dof)
     ev = _evidence(name, base, recs)
-    if p_line is not None:
+    if line is not None:
         # the frequency was searched over all ordinates: use the max-statistic p-value
-        p = max(p, p_line)
-        ev = (f"isolated spike at {config['frequency']:.4g} Hz, {r_line:.3g}x the local "
+        p = max(p, line[1])
+        ev = (f"isolated spike at {line[0]:.4g} Hz, {line[2]:.3g}x the local "
               "spectrum: line noise")
     if not ok:
         ev += " (refit did not converge)"
@@ -164,23 +202,27 @@ def _likelihood_candidate(recs, mdl, k, base, name: str, warm: dict):
                      plausible=plausible), params
 
 
+_DIRECT_TESTS = {"kurtosis": lambda recs, base: _anharmonicity_candidate(recs, base),
+                 "timestamps": lambda recs, base: _timing_candidate(recs)}
+
+
 def try_candidates(recs, mdl, k, base, candidates) -> tuple[list[Candidate], dict]:
-    """Test every candidate against the base fit. Returns the candidates (unranked) and each
-    screened effect's optimum (the start of the full refit)."""
+    """Test every candidate (a name or an effect object) against the base fit, each the way
+    its class says (``diagnose_test``). Returns the candidates (unranked) and each screened
+    effect's optimum (the start of the full refit)."""
     out = []
     screened = {}  # candidate -> optimum of its screening fit (start of the full refit)
     # warm start from the base fit, except parameters it pinned at a bound (eps^2 -> 0 when a
     # deficit is missing): in log coordinates they could not move back, so they restart
     # from their closed-form values
     warm = {n: v for n, v in base.params.items() if n not in base.at_bounds}
-    for name in candidates:
-        if name == "anharmonicity":
-            out.append(_anharmonicity_candidate(recs, base))
+    for c in candidates:
+        name = candidate_name(c)
+        test = "likelihood" if name in COUPLED_GROUPS else EFFECTS[name].diagnose_test
+        if test in _DIRECT_TESTS:
+            out.append(_DIRECT_TESTS[test](recs, base))
             continue
-        if name == "timing_jitter":
-            out.append(_timing_candidate(recs))
-            continue
-        cand, params = _likelihood_candidate(recs, mdl, k, base, name, warm)
+        cand, params = _likelihood_candidate(recs, mdl, k, base, name, warm, c)
         out.append(cand)
         if params is not None:
             screened[name] = params

@@ -117,8 +117,12 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
 
     - `data`: Recording, RecordingSet, list of recordings or manifest path.
     - `model`: ``"naive"``, ``"blur"``, ``"standard"`` (default), a ``TrapModel`` or
-      ``"standard+drift"``; `add`: effect names added to it first.
-    - `candidates`: effect names to try (default: every applicable one not in the model).
+      ``"standard+drift"``; `add`: effects (names or objects) added to it first.
+    - `candidates`: effects to try, by canonical name or as effect objects
+      (``bt.effects.Drift(drift_diffusion=2e-16)``: its values start the screening fit; the
+      very object given to ``simulate(..., effects=...)``). Default: every effect of
+      :data:`blurtrap.effects.EFFECTS` not in the model whose class says it ``applies`` to
+      the data, tested the way it says (``diagnose_test``), plus the coupled groups.
     - `alpha`: family-wise false-alarm rate (Bonferroni over the GOF test and candidates).
     - `k`: stiffness sharing (default ``linear_power`` for >= 3 laser powers, so that
       power_offset / laser_heating are testable).

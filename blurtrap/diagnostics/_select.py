@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from ..inference import CalibrationResult, get_model
 from ..inference.internal import as_recordings
-from ._candidates import _check_alpha, _check_candidates
+from ._candidates import _check_alpha, _check_candidates, candidate_name
 from ._diagnose import diagnose
 from ._results import Selection
 
@@ -50,7 +50,7 @@ def select_model(data, model=None, *, max_steps: int = 3, alpha: float = 0.05,
         mdl = best.model
         added.append(best.effect)
         if candidates is not None:
-            candidates = [c for c in candidates if c != best.effect]
+            candidates = [c for c in candidates if candidate_name(c) != best.effect]
     notes += [n for n in steps[-1].notes if "is not significant, but adding it moves" in n]
     return Selection(model=mdl, adequate=steps[-1].adequate, steps=tuple(steps),
                      added=tuple(added), notes=tuple(notes))

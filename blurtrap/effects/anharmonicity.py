@@ -25,3 +25,7 @@ class Anharmonicity(AbstractEffect):
     name: ClassVar[str] = "anharmonicity"
     kind: ClassVar[str] = "histogram"
     signature: ClassVar[str] = "non-Gaussian position histogram (kurtosis)"
+    diagnose_test: ClassVar[str] = "kurtosis"
+    order: ClassVar[float] = 120.0
+    simulate_note: ClassVar[str] = ("it changes the force: use simulate(..., method='euler', "
+                                    "force=quartic_force, force_params=(k, k4))")

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ..physics._effects import photodiode_transfer
-from ._base import AbstractEffect, Param
+import numpy as np
+
+from ..physics import photodiode_transfer
+from . import injections
+from ._base import AbstractEffect, DataContext, Param, value_field
 
 
 class DetectorFilter(AbstractEffect):
@@ -24,7 +27,10 @@ class DetectorFilter(AbstractEffect):
     diagnose's threshold 0.0083 in 1.0 +- 0.6 % (nominal ~1.1 %), and the model P_d matches an
     independent reference to 2e-5 (benchmarks/RESULTS_diagnose.md, section 4). Its
     high-frequency deficit is also what an unphysically large hydrodynamic radius
-    produces; ``diagnose`` rejects that alternative by the Stokes-radius check."""
+    produces; ``diagnose`` rejects that alternative by the Stokes-radius check.
+
+    Values: ``f3db`` [Hz] (> 0) and ``diode_alpha`` (in [0, 1]), scalars to simulate
+    (``injections.PhotodiodeFilter``: ``method="exact_frames"`` or ``"spectral"``)."""
 
     name: ClassVar[str] = "detector_filter"
     kind: ClassVar[str] = "transfer"
@@ -35,6 +41,18 @@ class DetectorFilter(AbstractEffect):
               bounds=(1e-6, 1.0), start=lambda c: 0.3),
     )
     signature: ClassVar[str] = "high-frequency deficit with a low-pass shape"
+    order: ClassVar[float] = 70.0
+
+    f3db: np.ndarray | None = value_field("Hz", "> 0")
+    diode_alpha: np.ndarray | None = value_field("1", (0.0, 1.0))
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        return ctx.sampling_rate >= 10_000.0  # photodiode rates only
+
+    def to_injection(self) -> injections.PhotodiodeFilter:
+        return injections.PhotodiodeFilter(self._value("f3db", scalar=True),
+                                           self._value("diode_alpha", scalar=True))
 
     def transfer(self, f, w, extras):
         return photodiode_transfer(f, extras["f3db"], extras["diode_alpha"])

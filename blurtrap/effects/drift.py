@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ..physics._effects import drift_psd
-from ._base import AbstractEffect, Param
+import numpy as np
+
+from ..physics import drift_psd
+from . import injections
+from ._base import AbstractEffect, Param, value_field
 
 
 class Drift(AbstractEffect):
@@ -48,6 +51,13 @@ class Drift(AbstractEffect):
                               bounds=(1e-30, 1e-8),
                               start=lambda c: 0.01 * c.variance / c.duration),)
     signature: ClassVar[str] = "excess power at the lowest frequencies (~1/f^2)"
+    order: ClassVar[float] = 40.0
+
+    #: value [m^2/s] (>= 0): simulated as ``injections.RandomWalkDrift``
+    drift_diffusion: np.ndarray | None = value_field("m^2/s", ">= 0")
+
+    def to_injection(self) -> injections.RandomWalkDrift:
+        return injections.RandomWalkDrift(self._value("drift_diffusion"))
 
     def psd_add(self, f, dt, extras):
         # expected periodogram of a sampled random walk: twice its increment PSD (docstring)

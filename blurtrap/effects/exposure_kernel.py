@@ -5,8 +5,10 @@ from __future__ import annotations
 from typing import ClassVar
 
 import jax.numpy as jnp
+import numpy as np
 
-from ._base import AbstractEffect, Param
+from . import injections
+from ._base import AbstractEffect, DataContext, Param, value_field
 
 
 class ExposureKernel(AbstractEffect):
@@ -28,13 +30,28 @@ class ExposureKernel(AbstractEffect):
     for smaller r). Detected or not, the rectangular-exposure fit had k or gamma > 3 SE off in
     every one of these records (benchmarks/RESULTS_diagnose.md, section 4);
     at dt >> tau (k = 0.1 pN/nm, 3 x 8192 frames) a triangle was missed in 2/2 records while
-    biasing k by ~2.8 SE."""
+    biasing k by ~2.8 SE.
+
+    Value: ``rise_fraction`` (in [0, 0.5], scalar to simulate); ``simulate(...,
+    effects=[ExposureKernel(rise_fraction=r)])`` uses ``exposure_profile=TrapezoidProfile(r)``
+    (substep methods)."""
 
     name: ClassVar[str] = "exposure_kernel"
     kind: ClassVar[str] = "transfer"
     params: ClassVar = (Param("rise_fraction", "1", 1.0, "", "rise/fall time / W", 0.5,
                               bounds=(1e-6, 0.5), start=lambda c: 0.1),)
     signature: ClassVar[str] = "high-frequency spectral shape unlike sinc^2"
+    order: ClassVar[float] = 60.0
+
+    rise_fraction: np.ndarray | None = value_field("1", (0.0, 0.5))
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        # one exposure: the kernel shape is absorbed by k, gamma, eps^2 (exact ARMA(1,1))
+        return ctx.blurred and ctx.n_exposures >= 2
+
+    def to_injection(self) -> injections.TrapezoidProfile:
+        return injections.TrapezoidProfile(self._value("rise_fraction", scalar=True))
 
     def transfer(self, f, w, extras):
         r = extras["rise_fraction"]

@@ -6,10 +6,12 @@ from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
+from .._constants import BOLTZMANN
 from ..physics import POLYSTYRENE_DENSITY, hydro_lorentzian, water_density, water_viscosity
-from ..physics._constants import BOLTZMANN
-from ._base import AbstractEffect, Param, StartContext
+from . import injections
+from ._base import AbstractEffect, DataContext, Param, StartContext, value_field
 
 
 def _stokes_radius(c: StartContext) -> float:
@@ -48,7 +50,10 @@ class Hydrodynamics(AbstractEffect):
     6/6 and R = 1.0 um 6/6 at 200 kHz, 2^16 samples; R = 0.5 um 4/6 and R = 0.25 um 3/6 (the
     others named detector_filter); R = 1.5 um at 100 kHz, 2^14 samples 5/6. So beads of
     R >= 1 um are named reliably with >= 2^16 samples at 200 kHz; smaller beads need longer
-    records than that to be named rather than merely detected."""
+    records than that to be named rather than merely detected.
+
+    Value: ``hydro_radius`` [m] (> 0, scalar to simulate): ``injections.HydrodynamicFriction``
+    with this effect's ``distance`` and ``bead_density`` (``method="spectral"``)."""
 
     name: ClassVar[str] = "hydrodynamics"
     kind: ClassVar[str] = "friction"
@@ -58,6 +63,17 @@ class Hydrodynamics(AbstractEffect):
 
     distance: float | None = eqx.field(static=True, default=None)
     bead_density: float = eqx.field(static=True, default=POLYSTYRENE_DENSITY)
+    hydro_radius: np.ndarray | None = value_field("m", "> 0")
+    order: ClassVar[float] = 80.0
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        return ctx.sampling_rate >= 10_000.0  # not visible in camera data
+
+    def to_injection(self) -> injections.HydrodynamicFriction:
+        return injections.HydrodynamicFriction(self._value("hydro_radius", scalar=True),
+                                               bead_density=self.bead_density,
+                                               distance=self.distance)
 
     def __check_init__(self):
         checks = [("bead_density", self.bead_density, "kg/m^3")]

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ._base import AbstractEffect, Param
+import numpy as np
+
+from ._base import AbstractEffect, DataContext, Param, value_field
 
 
 class LaserHeating(AbstractEffect):
@@ -18,3 +20,12 @@ class LaserHeating(AbstractEffect):
     params: ClassVar = (Param("heating", "K/W", 1.0, "K/W", "heating coefficient b",
                               bounds=(1e-3, 1e4), start=lambda c: 10.0),)
     signature: ClassVar[str] = "gamma falls with laser power"
+    order: ClassVar[float] = 110.0
+    simulate_note: ClassVar[str] = (
+        "it relates recordings at several laser powers: simulate one per power with "
+        "temperature T0 + b P and gamma scaled by water_viscosity(T)/water_viscosity(T0)")
+    heating: np.ndarray | None = value_field("K/W", ">= 0")
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        return ctx.multi_power and ctx.k_mode == "linear_power"

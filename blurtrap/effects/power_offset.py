@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ._base import AbstractEffect, Param
+import numpy as np
+
+from ._base import AbstractEffect, DataContext, Param, value_field
 
 
 class PowerOffset(AbstractEffect):
@@ -17,3 +19,12 @@ class PowerOffset(AbstractEffect):
                               bounds=(1e-9, 10.0),
                               start=lambda c: 0.05 * min(c.powers) if c.powers else 1e-3),)
     signature: ClassVar[str] = "k-vs-power line misses the origin"
+    order: ClassVar[float] = 100.0
+    simulate_note: ClassVar[str] = (
+        "it relates k across laser powers: simulate one recording per power with "
+        "k = c (P - P0)")
+    power_offset: np.ndarray | None = value_field("W", ">= 0")
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        return ctx.multi_power and ctx.k_mode == "linear_power"

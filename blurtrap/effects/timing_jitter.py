@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ._base import AbstractEffect
+import numpy as np
+
+from . import injections
+from ._base import AbstractEffect, DataContext, value_field
 
 
 class TimingJitter(AbstractEffect):
@@ -19,8 +22,22 @@ class TimingJitter(AbstractEffect):
     **Remedy.** ``calibrate`` fits recordings with irregular time stamps by the exact
     likelihood at the recorded frame times (a Kalman filter of the blurred trap process,
     ``blurtrap.inference._irregular``; closed-form models), so jitter, a wandering clock or
-    dropped frames do not bias k and gamma (benchmarks/RESULTS_jitter.md)."""
+    dropped frames do not bias k and gamma (benchmarks/RESULTS_jitter.md).
+
+    Value: ``std`` [s] (>= 0), the jitter of the frame start times; simulated as
+    ``injections.TimingJitter`` (``simulate(..., return_times=True)`` returns the times)."""
 
     name: ClassVar[str] = "timing_jitter"
     kind: ClassVar[str] = "timestamps"
     signature: ClassVar[str] = "uneven time stamps"
+    diagnose_test: ClassVar[str] = "timestamps"
+    order: ClassVar[float] = 130.0
+
+    std: np.ndarray | None = value_field("s", ">= 0")
+
+    @classmethod
+    def applies(cls, ctx: DataContext) -> bool:
+        return ctx.has_times
+
+    def to_injection(self) -> injections.TimingJitter:
+        return injections.TimingJitter(self._value("std"))

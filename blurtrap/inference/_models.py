@@ -59,23 +59,31 @@ class TrapModel(eqx.Module):
 
     # ---- composition -----------------------------------------------------------------
     def add(self, *effects, **config) -> TrapModel:
-        """A new model with the given effects (canonical names or instances) added."""
+        """A new model with the given effects (canonical names, classes or instances) added.
+        An instance's parameter values are dropped (the model holds structure; the fit starts
+        from each parameter's start rule: pass ``start=`` or ``fixed=`` to ``calibrate`` to use
+        them); its configuration (``LineNoise(frequency=...)``) is kept."""
         model = self
         for e in effects:
-            name = e.name if isinstance(e, AbstractEffect) else e
+            name = e.name if isinstance(e, AbstractEffect) or isinstance(e, type) else e
             if name in _FLAGS:
                 model = dataclasses.replace(model, blur=model.blur or name == "motion_blur",
                                             alias=model.alias or name == "aliasing",
                                             noise=model.noise or name == "tracking_noise",
                                             name=f"{model.name}+{name}")
                 continue
-            eff = make_effect(e, **config)
+            eff = make_effect(e, **config).without_values()
             if any(x.name == eff.name for x in model.extra):
                 raise ValueError(f"effect {eff.name!r} is already in the model")
             if eff.kind in ("histogram", "timestamps"):
                 raise ValueError(
                     f"effect {eff.name!r} ({eff.kind}) is not part of the Gaussian likelihood; "
                     "diagnose() tests it from the frame histogram / time stamps"
+                )
+            if eff.kind == "input":
+                raise ValueError(
+                    f"effect {eff.name!r} is a known input, not part of the model: calibrate "
+                    "fits it from the recording's instrument setting (e.g. drive)"
                 )
             model = dataclasses.replace(model, name=f"{model.name}+{eff.name}",
                                         extra=model.extra + (eff,))

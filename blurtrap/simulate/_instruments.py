@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-_MODES = ("fluid", "additive")
+from ..effects.injections import StageDrive as StageDrive
 
 
 def _scalar(name, value, unit, positive):
@@ -49,66 +49,6 @@ def _scalar(name, value, unit, positive):
         rule = "> 0" if positive else ">= 0"
         raise ValueError(f"{name} must be a finite scalar {rule} {unit}; got {name} = {value!r} {unit}")
     return float(arr)
-
-
-class StageDrive(eqx.Module):
-    r"""Sinusoidal stage drive (``stage_drive``): ``x_s(t) = amplitude sin(2 pi frequency t +
-    phase)``, passed in ``simulate(..., injections=(StageDrive(...),))`` (or to
-    :func:`simulate_photodiode`). See the module docstring for the two modes.
-
-    - `amplitude`: A [m], >= 0.
-    - `frequency`: f_d [Hz], > 0 (keep it below the Nyquist frequency of the frames).
-    - `phase`: phi [rad] at t = 0 (the first frame's start), default 0.
-    - `mode`: ``"fluid"`` (the stage moves the fluid; the bead responds through
-      ``H(f) = i f/(f_c + i f)``) or ``"additive"`` (the trace contains ``x_s`` itself).
-
-    Several drives (e.g. two frequencies) may be given; their terms add.
-    """
-
-    amplitude: float = eqx.field(static=True)
-    frequency: float = eqx.field(static=True)
-    phase: float = eqx.field(static=True)
-    mode: str = eqx.field(static=True)
-    name = "stage_drive"
-
-    def __init__(self, amplitude, frequency, phase=0.0, mode="fluid"):
-        self.amplitude = _scalar("amplitude", amplitude, "m", positive=False)
-        self.frequency = _scalar("frequency", frequency, "Hz", positive=True)
-        ph = np.asarray(phase, dtype=np.float64)
-        if ph.ndim != 0 or not np.isfinite(ph):
-            raise ValueError(f"phase must be a finite scalar [rad]; got phase = {phase!r}")
-        self.phase = float(ph)
-        if mode not in _MODES:
-            raise ValueError(f"mode must be one of {_MODES}; got mode = {mode!r}")
-        self.mode = mode
-
-    def position(self, t):
-        """Stage position ``x_s(t)`` [m] at times `t` [s] (NumPy, float64)."""
-        t = np.asarray(t, dtype=np.float64)
-        return self.amplitude * np.sin(2.0 * np.pi * self.frequency * t + self.phase)
-
-    def response(self, k, gamma):
-        """Complex transfer from the stage to the trace at the drive frequency: ``i f_d /
-        (f_c + i f_d)`` with ``f_c = k / (2 pi gamma)`` (``"fluid"``), or 1 (``"additive"``).
-        `k` [N/m] and `gamma` [N s/m] broadcast (NumPy)."""
-        k = np.asarray(k, dtype=np.float64)
-        gamma = np.asarray(gamma, dtype=np.float64)
-        if self.mode == "additive":
-            return np.ones(np.broadcast_shapes(k.shape, gamma.shape), dtype=np.complex128)
-        fc = k / (2.0 * np.pi * gamma)
-        return 1j * self.frequency / (fc + 1j * self.frequency)
-
-    def frame_gain(self, k, gamma, exposure, photodiode=None):
-        r"""Complex gain ``g`` of the frames: frame ``n`` holds ``Im[A g e^{i(2 pi f_d t_n +
-        phi)}]`` (``t_n`` its start time) = ``response * H_pd(f_d) * sinc(f_d W) e^{i pi f_d W}``.
-        `exposure` W [s] broadcasts with `k`, `gamma`; `photodiode` an optional
-        :class:`PhotodiodeFilter`."""
-        w = np.asarray(exposure, dtype=np.float64)
-        f = self.frequency
-        g = self.response(k, gamma) * np.sinc(f * w) * np.exp(1j * np.pi * f * w)
-        if photodiode is not None:
-            g = g * (photodiode.alpha + (1.0 - photodiode.alpha) / (1.0 + 1j * f / photodiode.f3db))
-        return g
 
 
 class Sensitivity(eqx.Module):

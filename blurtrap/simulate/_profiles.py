@@ -14,25 +14,7 @@ from __future__ import annotations
 import equinox as eqx
 import numpy as np
 
-
-class TrapezoidProfile(eqx.Module):
-    """Linear rise over the first ``rise_fraction`` of the exposure and linear fall over the
-    last; matches ``blurtrap.physics.TrapezoidKernel(exposure, rise=rise_fraction*exposure)``."""
-
-    rise_fraction: float = eqx.field(static=True)
-
-    def __init__(self, rise_fraction):
-        r = float(rise_fraction)
-        if not (0.0 <= r <= 0.5):
-            raise ValueError(f"rise_fraction must be in [0, 0.5]; got rise_fraction = {r!r}")
-        self.rise_fraction = r
-
-    def __call__(self, u):
-        u = np.asarray(u, dtype=np.float64)
-        if self.rise_fraction == 0.0:
-            return np.ones_like(u)
-        r = self.rise_fraction
-        return np.clip(np.minimum(u / r, (1.0 - u) / r), 0.0, 1.0)
+from ..effects.injections import TrapezoidProfile as TrapezoidProfile
 
 
 class ExponentialProfile(eqx.Module):

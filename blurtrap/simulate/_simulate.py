@@ -16,6 +16,7 @@ import jax.numpy as jnp
 from ..physics import DEFAULT_TEMPERATURE
 from ._exposure import ExposureWindows, make_grid
 from ._finish import add_injections, frame_times, shape_output
+from ._injections import from_effects
 from ._scan_coefs import SubstepBiasWarning as SubstepBiasWarning
 from ._scan_coefs import scan_plan
 from ._scan_run import run_scan
@@ -45,6 +46,7 @@ def simulate(
     substeps: int | None = None,
     tracking_std=0.0,
     injections: Sequence = (),
+    effects: Sequence = (),
     exposure_profile: Callable | None = None,
     force: Callable | None = None,
     force_params=None,
@@ -142,6 +144,16 @@ def simulate(
       (sinusoidal stage drive: its exact response, blurred over the exposure, is added to the
       frames; ``mode="fluid"`` or ``"additive"``, see ``blurtrap.simulate._instruments``) and
       at most one :class:`Sensitivity` (applied last: the output is then in volts).
+    - `effects`: effect objects of :mod:`blurtrap.effects` with their values, e.g.
+      ``[bt.effects.Drift(drift_diffusion=2e-16), bt.effects.TrackingNoise(tracking_var=...)]``:
+      each becomes its injection (``effect.to_injection()``), appended after `injections` in
+      order, so the same object can be simulated here and tested by ``diagnose``.
+      ``ExposureKernel(rise_fraction=r)`` sets the exposure profile (``TrapezoidProfile(r)``;
+      not together with `exposure_profile`); ``MotionBlur()`` and ``Aliasing()`` are accepted
+      and change nothing (the frames always average over `exposure` and are sampled every
+      `frame_interval`: they are the detector's properties). Effects that cannot be simulated
+      (``power_offset``, ``laser_heating``, ``anharmonicity``) or whose value is ``None`` raise
+      a ``ValueError`` naming the effect.
     - `exposure_profile`: callable ``p(u)``, ``u = t/W`` in [0, 1], weighting the exposure
       (e.g. :class:`TrapezoidProfile`, :class:`ExponentialProfile`); substep methods and a
       single window only.
@@ -196,6 +208,8 @@ def simulate(
     for the exact OU update.
     """
     keys = as_keys(key)
+    from_eff, exposure_profile = from_effects(effects, exposure_profile)
+    injections = (*injections, *from_eff)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got method = {method!r}")
     n_frames = count("n_frames", n_frames)
