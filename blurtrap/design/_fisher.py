@@ -60,10 +60,11 @@ def _unpack(th, noise):
 
 
 def whittle_information(k, gamma, exposure, frame_interval, n_frames, temperature=295.0,
-                        tracking_var=0.0):
+                        tracking_var=0.0, noise: bool | None = None):
     """Whittle Fisher information (per ``theta``) of ``n_frames`` frames. Differentiable in
-    every argument (so a design can be optimised by gradients)."""
-    noise = _has_noise(tracking_var)
+    every argument (so a design can be optimised by gradients). `noise` (static): whether
+    log eps^2 is a parameter; default: unless `tracking_var` is a concrete zero."""
+    noise = _has_noise(tracking_var) if noise is None else bool(noise)
     fs = 1.0 / frame_interval
     f = _U * fs / 2.0  # (0, fs/2): P_d is even, so <.> over (0, fs) equals that over (0, fs/2)
 

@@ -19,33 +19,44 @@ def _single_se(result, exposures, intervals):
     """Relative SE (fraction; worst over the k range) of k and gamma for one recording at
     each (exposure, frame interval) pair, with the settings of the design (same total time,
     or same frames per recording, and the same noise model)."""
-    import jax
-    import jax.numpy as jnp
-
-    from ..design import whittle_information
-
     s = result.settings
     eps_ref2 = float(s["tracking_std_m"]) ** 2
-    w_ref = float(s["reference_exposure_s"])
-    photon = bool(s["photon_limited"])
-    temperature = float(s["temperature_K"])
-    gamma = float(s["gamma_N_s_per_m"])
     total = s.get("total_time_s")
-    n_fixed = s.get("n_frames")
-
-    def one(w, dt):
-        n = total / dt if total is not None else float(n_fixed)
-        e2 = eps_ref2 * (w_ref / w) if photon else eps_ref2
-        se = []
-        for k in result.k:
-            info = whittle_information(k, gamma, w, dt, n, temperature, e2)
-            se.append(jnp.sqrt(jnp.diag(jnp.linalg.inv(info)))[:2])
-        return jnp.max(jnp.stack(se), axis=0)
-
-    out = jax.jit(jax.vmap(one))(jnp.asarray(exposures), jnp.asarray(intervals))
+    budget = float(total if total is not None else s["n_frames"])
+    out = _grid_se()(np.asarray(exposures, dtype=float), np.asarray(intervals, dtype=float),
+                   np.asarray(result.k, dtype=float), float(s["gamma_N_s_per_m"]),
+                   float(s["temperature_K"]), eps_ref2, float(s["reference_exposure_s"]),
+                   budget, photon=bool(s["photon_limited"]), by_time=total is not None,
+                   noise=eps_ref2 > 0)
     out = np.array(out, dtype=float)
     out[~(out * 100 <= _SE_CAP)] = np.nan
     return out
+
+
+_GRID_SE: list = []  # the jitted grid evaluation, made on first use (jax imported lazily)
+
+
+def _grid_se():
+    """``f(exposures, intervals, ks, gamma, T, eps_ref^2, W_ref, budget, *, photon, by_time,
+    noise)`` -> (n, 2) relative SEs: one compiled, vmapped program reused by every call."""
+    if not _GRID_SE:
+        import jax
+        import jax.numpy as jnp
+
+        from ..design import relative_se
+
+        def grid(exposures, intervals, ks, gamma, temperature, eps_ref2, w_ref, budget, *,
+                 photon, by_time, noise):
+            def one(w, dt):
+                n = budget / dt if by_time else budget
+                se = relative_se([(dt, w, n)], ks, gamma, temperature, eps_ref2, w_ref, photon,
+                                 noise)
+                return jnp.max(se[:, :2], axis=0)
+
+            return jax.vmap(one)(exposures, intervals)
+
+        _GRID_SE.append(jax.jit(grid, static_argnames=("photon", "by_time", "noise")))
+    return _GRID_SE[0]
 
 
 def _target_se(cand, target):

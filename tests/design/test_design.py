@@ -107,3 +107,26 @@ def test_design_never_recommends_an_unidentified_design():
     optimised series (gamma SE 241 %) was recommended for k."""
     with pytest.raises(ValueError, match="identifies both k and gamma"):
         bt.design(k=5e-4, radius=1.53e-6, max_fps=500, total_time=60.0, tracking_std=2e-9)
+
+
+def test_design_without_tracking_noise_optimises_its_series():
+    """tracking_std = 0: eps^2 is no parameter, also inside the optimiser (before, the traced
+    eps^2 = 0 made log eps^2 a parameter there, every optimised candidate had a singular
+    information and only the two fixed candidates were compared). The optimised single
+    recording at W = dt is W = dt at the fastest frame rate, so its SE equals that one's to
+    the optimiser's tolerance, and each SE is the Whittle information's, from _fisher."""
+    from blurtrap.design import whittle_information
+
+    res = bt.design(k=K, gamma=GAMMA, max_fps=1500, n_frames=65536, tracking_std=0.0,
+                    series=(1, 2))
+    labels = [c.label for c in res.candidates]
+    assert "optimised single recording" in labels and "optimised series of 2 exposures" in labels
+    for c in res.candidates:
+        assert set(c.predicted_se) == {"k", "gamma"} and np.isfinite(c.objective)
+        info = sum(np.asarray(whittle_information(K, GAMMA, w, dt, n, 295.0, 0.0))
+                   for dt, w, n in c.recordings)
+        se = np.sqrt(np.diag(np.linalg.inv(info)))
+        assert np.allclose([c.predicted_se["k"][0], c.predicted_se["gamma"][0]], se, rtol=1e-9)
+    one = res.candidates[labels.index("optimised single recording")]
+    wdt = res.candidates[labels.index("W = dt at the fastest frame rate")]
+    assert one.objective <= wdt.objective * (1 + 1e-4)
