@@ -7,7 +7,9 @@ and returns a :class:`Plan`: the model, the held parameters, the cleaned recordi
 band to fit. :func:`finish_instrument` turns the fit into the reported result: for positions
 in volts the displacement sensitivity ``Rd`` [m/V] and the force sensitivity ``Rf = k Rd``
 [N/V], with the friction known (``friction="stokes"``: ``gamma = 6 pi eta R``, Faxen's factor
-near a surface) or measured by the drive; every input error propagated to first order.
+near a surface) or measured by the drive; every input error propagated to first order. With
+the bead known, the frequency-dependent (hydrodynamic) friction of :mod:`._hydro_known` joins
+the model when ``hydrodynamics`` asks for it or ("auto") when ignoring it would bias the fit.
 
 **Volts.** A trace in volts ``x_V = x / Rd`` is the trap process scaled: fitted as if it were
 in metres it gives ``k_V = k Rd^2``, ``gamma_V = gamma Rd^2`` (``tau`` and ``f_c`` are scale
@@ -210,9 +212,10 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
 def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction=None,
                        detector=None, anti_aliasing=None, excluded_ranges=None, lines="auto",
-                       f_range=None) -> Plan:
+                       f_range=None, hydrodynamics=None) -> Plan:
     """The plan of a calibration from the recordings' instrument settings and calibrate's
-    arguments (which win over the settings)."""
+    arguments (which win over the settings); ``hydrodynamics``: the known bead's
+    frequency-dependent friction (:mod:`._hydro_known`)."""
     from ._fixed import parse_fixed
 
     if lines not in ("auto", "keep"):
@@ -278,6 +281,10 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
         raise ValueError("positions are in volts: the displacement sensitivity Rd (m/V) needs "
                          "the friction (friction='stokes' with the bead radius, or "
                          "fixed={'gamma': ...}) or an active calibration (a stage drive)")
+    from ._hydro_known import plan_hydrodynamics
+
+    mdl = plan_hydrodynamics(cleaned, sts, mdl, method, hydrodynamics, held, notes, volts=volts,
+                             gamma_known=gamma_known, band=rng, excluded=excluded, drive=drive)
     return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
                 notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit)
 
