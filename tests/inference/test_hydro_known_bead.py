@@ -90,7 +90,12 @@ def _z(res, name, truth):
 
 @pytest.mark.parametrize("friction", ["free", "stokes"])
 def test_photodiode_fit_unbiased_with_and_biased_without(friction):
-    zs_on, zs_off, bias_off = [], [], []
+    """3 seeds, 2^17 samples at 78.125 kHz, R = 1.5 um: with the correction k and gamma within
+    3 SE of the truth; without it gamma is +23 % off (~26 SE, friction free) and k is
+    ~ -1.7 % off with gamma held (about 1 SE per record: shown paired, on the same traces)."""
+    zs_on, zs_off, shift = [], [], []
+    names = ["k"] + (["gamma"] if friction == "free" else [])
+    truth = {"k": K, "gamma": GAMMA0}
     for seed in range(3):
         x = generate_hydro(2**17, FS, K, R, seed, eta=ETA_W, rho_f=RHO_W, tracking_std=0.5e-9)
         rec = _photodiode(x, friction=friction)
@@ -98,15 +103,14 @@ def test_photodiode_fit_unbiased_with_and_biased_without(friction):
         assert any(n.startswith("hydrodynamics: on (auto") for n in on.notes), on.notes
         off = bt.calibrate(rec, hydrodynamics=False)
         assert "hydro_radius" not in off.param_names
-        names = ["k"] + (["gamma"] if friction == "free" else [])
-        truth = {"k": K, "gamma": GAMMA0}
         zs_on += [_z(on, n, truth[n]) for n in names]
-        zs_off += [_z(off, n, truth[n]) for n in names]
-        bias_off.append(off.values[off.param_names.index(names[-1])] / truth[names[-1]] - 1)
+        zs_off.append(_z(off, names[-1], truth[names[-1]]))
+        shift.append(off.values[0] / on.values[0] - 1)
     assert max(abs(z) for z in zs_on) < 3.0, zs_on
-    # without the correction: gamma +23 % (free; ~26 SE), k -4 % (stokes; ~8 SE) per seed
-    assert min(abs(z) for z in zs_off[len(names) - 1::len(names)]) > 5.0, (zs_off, bias_off)
-    assert abs(np.mean(bias_off)) > 0.03, bias_off
+    if friction == "free":
+        assert min(zs_off) > 5.0, zs_off  # gamma without the correction
+    else:
+        assert max(shift) < -0.005, shift  # k without the correction, paired
 
 
 @float64_scope
