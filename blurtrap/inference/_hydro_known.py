@@ -10,22 +10,33 @@ not given). ``gamma`` (the zero-frequency friction) is held at Stokes x Faxen wi
 ``friction="stokes"`` or fitted.
 
 **When "auto" turns it on.** With the bead radius known, the linearised bias of the Whittle
-fit that ignores ``gamma(f)`` is computed from the model spectra at a moment estimate of
-(k, gamma, eps^2), on the fitted band's Fourier ordinates (the core detector model: exposure
-average, folding, tracking noise; other effects left out, which can only overstate the bias):
+fit that ignores ``gamma(f)`` is computed from the model spectra at a rough estimate of
+(k, gamma, eps^2) (below), on the fitted band's Fourier ordinates (the core detector model:
+exposure average, folding, tracking noise; other effects left out, which can only overstate
+the bias):
 
 ``d theta = -F^{-1} sum_j grad log P0_j (1 - P1_j / P0_j)``,  ``F = sum_j grad log P0_j
 grad log P0_j^T``,
 
 ``P1`` with and ``P0`` without the frequency-dependent friction, ``theta = (log k,
-log gamma, eps^2)`` (free ones only), ``F^{-1}`` the Whittle covariance. It is on when the
-larger of ``|d log k| / SE(log k)`` and ``|d log gamma| / SE(log gamma)`` exceeds
-:data:`AUTO_THRESHOLD` = 1/3 (over several recordings, the root sum of squares: the pooled
-ratio when they share k). At 1/3 SE a 95 % interval still covers ~94 %. Typical values
-(R = 1.5 um polystyrene in water at 295 K, k = 0.05 pN/nm; tests/inference/
-test_hydro_known_bead.py): a photodiode at 78.125 kHz (anti-aliased, band to 0.4 fs),
-2^17 samples: k off by ~ -5 % (tens of SE): on; a camera at 1 kHz (W = dt), 2^14 frames:
-a fraction of an SE: off.
+log gamma, eps^2)`` (free ones only), ``F^{-1}`` the Whittle covariance. For positions in
+metres the point is the bead's friction (Stokes x Faxen, or the held gamma) and the
+blur-corrected variance's k (robust where dt ~ tau); k's bias is predicted with gamma held,
+and with gamma free as well where the record determines gamma (SE of log gamma < 0.25, where
+the linearisation holds). In volts the point is the moment estimate. It is on when the
+largest |bias| / SE of k (and gamma) exceeds :data:`AUTO_THRESHOLD` = 1/3 (over several
+recordings, the root sum of squares: the pooled ratio when they share k). At 1/3 SE a 95 %
+interval still covers ~94 %.
+
+Numbers (R = 1.5 um polystyrene in water at 295 K, k = 0.1 pN/nm, f_c ~ 590 Hz; predicted /
+measured over 50 seeds in benchmarks/RESULTS_instruments.md):
+
+- photodiode 78.125 kHz, anti-aliased (band to 0.4 fs), 2^17 samples: gamma free, predicted
+  gamma +17 % (21 SE), measured +22.9 %; gamma held, k -1.7 % (0.9 SE): on;
+- camera 1 kHz, W = dt, 2^14 frames: k +0.35 % (0.18 SE): off; the same camera with a softer
+  trap (f_c = 59 Hz, band to 8.5 f_c) k -1.2 % (0.66 SE): on; 2^16 frames at 5 kHz: k -4 %
+  (6 SE): on. A camera needs the correction when its band reaches well past f_c and the
+  record is long; an fc of the order of its Nyquist frequency hides it.
 """
 
 from __future__ import annotations
