@@ -23,20 +23,23 @@ log gamma, eps^2)`` (free ones only), ``F^{-1}`` the Whittle covariance. For pos
 metres the point is the bead's friction (Stokes x Faxen, or the held gamma) and the
 blur-corrected variance's k (robust where dt ~ tau); k's bias is predicted with gamma held,
 and with gamma free as well where the record determines gamma (SE of log gamma < 0.25, where
-the linearisation holds). In volts the point is the moment estimate. It is on when the
-largest |bias| / SE of k (and gamma) exceeds :data:`AUTO_THRESHOLD` = 1/3 (over several
-recordings, the root sum of squares: the pooled ratio when they share k). At 1/3 SE a 95 %
-interval still covers ~94 %.
+the linearisation holds). In volts the point is the moment estimate. Where the corner
+frequency at that point is above the fitted band (dt >~ tau) "auto" leaves it off: k then
+comes from the spectrum's level, and the linearisation is not trusted (a 500 fps camera with
+f_c = 835 Hz, R = 0.54 um: predicted +2 %, while the fit with the correction moved k by
+-4 %). It is on when the largest |bias| / SE of k (and gamma) exceeds
+:data:`AUTO_THRESHOLD` = 1/3 (over several recordings, the root sum of squares: the pooled
+ratio when they share k). At 1/3 SE a 95 % interval still covers ~94 %.
 
 Numbers (R = 1.5 um polystyrene in water at 295 K, k = 0.1 pN/nm, f_c ~ 590 Hz; predicted /
 measured over 50 seeds in benchmarks/RESULTS_instruments.md):
 
 - photodiode 78.125 kHz, anti-aliased (band to 0.4 fs), 2^17 samples: gamma free, predicted
   gamma +17 % (21 SE), measured +22.9 %; gamma held, k -1.7 % (0.9 SE): on;
-- camera 1 kHz, W = dt, 2^14 frames: k +0.35 % (0.18 SE): off; the same camera with a softer
-  trap (f_c = 59 Hz, band to 8.5 f_c) k -1.2 % (0.66 SE): on; 2^16 frames at 5 kHz: k -4 %
-  (6 SE): on. A camera needs the correction when its band reaches well past f_c and the
-  record is long; an fc of the order of its Nyquist frequency hides it.
+- camera 1 kHz, W = dt, 2^14 frames: f_c above the band (and k +0.35 %, 0.18 SE): off; the
+  same camera with a softer trap (f_c = 59 Hz, band to 8.5 f_c) k -1.2 % (0.66 SE): on;
+  2^16 frames at 5 kHz: k -4 % (6 SE): on. A camera needs the correction when its band
+  reaches well past f_c and the record is long.
 """
 
 from __future__ import annotations
@@ -130,8 +133,8 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
     """``(bias, se)`` of (log k, log gamma) of a fit of ``rec`` that ignores ``effect``
     (module docstring) at ``gamma_guess`` (the bead's friction, positions in metres) and the
     blur-corrected variance's k, else at the moment estimate; the gamma entries are NaN when
-    ``gamma_fixed`` holds it. ``(0, inf)`` when the frames carry no lag correlation
-    (dt >> tau: the spectrum's shape is not fitted)."""
+    ``gamma_fixed`` holds it. ``(0, inf)`` when the corner frequency at that point is not
+    inside the fitted band (dt >~ tau: the spectrum's shape is not fitted)."""
     import jax
     import jax.numpy as jnp
 
@@ -150,11 +153,14 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
             k0 = float(stiffness_from_variance(float(np.var(x)), kt / gamma_guess,
                                                float(rec.exposure), float(rec.temperature)))
         g0 = gamma_guess
-        if not g0 / k0 > float(rec.frame_interval) / 20.0:  # dt/tau > 20: no shape
-            return np.zeros(2), np.full(2, np.inf)
     elif not 0.02 < rho < 0.99999:
         return np.zeros(2), np.full(2, np.inf)
     f, w = _ordinates(rec, band, excluded)
+    if f.size < 3 or not k0 / (2.0 * math.pi * g0) < f[-1]:
+        # the corner is not inside the fitted band: k comes from the spectrum's level, and
+        # the linearisation is not trusted there (an e2e camera case, f_c = 3.3 f_Nyquist:
+        # predicted +2 %, a fit with the correction moved k by -4 %)
+        return np.zeros(2), np.full(2, np.inf)
     core = TrapModel(blur=model.blur, alias=model.alias, noise=model.noise, name="rule")
     args = (jnp.asarray([float(rec.frame_interval)]), jnp.asarray([float(rec.exposure)]),
             jnp.asarray([float(rec.temperature)]))
@@ -282,8 +288,9 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
     else:
         ratio, bias = _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts)
         if ratio == 0.0:
-            notes.append("hydrodynamics: off (auto): dt >> tau, the spectrum's shape is not "
-                         "resolved; hydrodynamics=True to include it")
+            notes.append("hydrodynamics: off (auto): the corner frequency is not inside the "
+                         "fitted band (dt >~ tau), where the correction's size is not "
+                         "predicted; hydrodynamics=True to include it")
             return model
         pred = (f"ignoring it would bias k by {np.expm1(bias[0]) * 100:+.2g} %"
                 + ("" if np.isnan(bias[1]) else
