@@ -131,7 +131,8 @@ def calibrate(
     plan = prepare_instrument(recs, mdl, model is not None, method, fixed=fixed,
                               friction=friction, detector=detector,
                               anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
-                              lines=lines, f_range=f_range, hydrodynamics=hydrodynamics)
+                              lines=lines, f_range=f_range, hydrodynamics=hydrodynamics,
+                              likelihood=likelihood)
     res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
                      plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
                      _flag("robust", robust))

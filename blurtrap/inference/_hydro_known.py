@@ -240,7 +240,8 @@ def _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts):
 
 
 def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=False,
-                       gamma_known=None, band=None, excluded=(), drive=None):
+                       gamma_known=None, band=None, excluded=(), drive=None,
+                       likelihood="auto"):
     """The model with the known bead's hydrodynamics when the setting (``arg``, else the
     recordings' ``hydrodynamics``, default "auto") asks for it; holds ``hydro_radius`` in
     ``held`` and says what was used in ``notes``."""
@@ -264,6 +265,9 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
         reason = "the model already has the hydrodynamics effect (with a fitted hydro_radius)"
     elif method not in ("auto", "likelihood", "psd"):
         reason = f"applies to the spectral fits (likelihood, psd); got method = {method!r}"
+    elif likelihood == "exact":
+        reason = ("the exact time-domain likelihood (likelihood='exact') covers the "
+                  "closed-form model only")
     elif drive is not None:
         reason = "the active calibration's drive response is not hydrodynamically corrected yet"
     if reason is None and not explicit:
@@ -276,7 +280,8 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
     if reason is not None:
         if explicit:
             raise ValueError(f"hydrodynamics=True {reason}")
-        if drive is not None and sts[0].get("bead_radius_m") is not None:
+        if sts[0].get("bead_radius_m") is not None and (drive is not None
+                                                         or likelihood == "exact"):
             notes.append(f"hydrodynamics: off (auto): {reason}")
         return model
     eff, (rad, rad_se) = known_bead_effect(sts, gamma_known[0] if volts and gamma_known

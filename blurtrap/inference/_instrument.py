@@ -212,7 +212,7 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
 def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction=None,
                        detector=None, anti_aliasing=None, excluded_ranges=None, lines="auto",
-                       f_range=None, hydrodynamics=None) -> Plan:
+                       f_range=None, hydrodynamics=None, likelihood="auto") -> Plan:
     """The plan of a calibration from the recordings' instrument settings and calibrate's
     arguments (which win over the settings); ``hydrodynamics``: the known bead's
     frequency-dependent friction (:mod:`._hydro_known`)."""
@@ -284,7 +284,8 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
     from ._hydro_known import plan_hydrodynamics
 
     mdl = plan_hydrodynamics(cleaned, sts, mdl, method, hydrodynamics, held, notes, volts=volts,
-                             gamma_known=gamma_known, band=rng, excluded=excluded, drive=drive)
+                             gamma_known=gamma_known, band=rng, excluded=excluded, drive=drive,
+                             likelihood=likelihood)
     return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
                 notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit)
 

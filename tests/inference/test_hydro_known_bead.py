@@ -145,12 +145,18 @@ def test_setting_from_metadata_and_argument_wins():
                                "independent of frequency"]
     on, note = _auto_note(rec, hydrodynamics=True)
     assert on and note[0].startswith("hydrodynamics: on (hydrodynamics=True)")
+    # an explicit exact likelihood keeps "auto" off (the closed-form model), with a note
+    plan = float64_scope(prepare_instrument)([_photodiode(x)], get_model(None), False, "auto",
+                                             likelihood="exact")
+    assert not plan.model.has("hydrodynamics")
+    assert any(n.startswith("hydrodynamics: off (auto): the exact") for n in plan.notes)
 
 
 @pytest.mark.parametrize("kw,msg", [
     (dict(hydrodynamics="yes"), "hydrodynamics must be None"),
     (dict(hydrodynamics=1), "hydrodynamics must be None"),
     (dict(hydrodynamics=True, method="equipartition"), "spectral fits"),
+    (dict(hydrodynamics=True, likelihood="exact"), "exact time-domain likelihood"),
 ])
 def test_bad_arguments(kw, msg):
     x = generate_hydro(2**12, FS, K, R, 1)
