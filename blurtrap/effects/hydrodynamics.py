@@ -36,7 +36,11 @@ class Hydrodynamics(AbstractEffect):
     Static options: ``distance`` [m] from the bead centre to a surface (default ``None``:
     bulk); with it the frequency dependence is that of Tolic-Norrelykke et al. (2006), eq. D6
     (``blurtrap.physics.complex_friction``), meant for ``distance >~ 1.5 hydro_radius``.
-    ``bead_density`` [kg/m^3] (default polystyrene, 1050).
+    ``bead_density`` [kg/m^3] (default polystyrene, 1050). ``viscosity`` [Pa s] and
+    ``fluid_density`` [kg/m^3] of the medium (default ``None``: water at T). ``bead_friction``
+    [N s/m]: the bead's zero-frequency friction for its inertia, ``f_m = gamma/(2 pi m*)``
+    (default ``None``: the fitted gamma; a fit of positions in volts, whose gamma is in volts
+    units, passes the known friction).
 
     Signature: relative to the best Lorentzian a high-frequency deficit growing like
     sqrt(f/f_nu), f_nu = nu/(pi R^2) (~130 kHz for R = 1.5 um). Not visible in camera data.
@@ -64,6 +68,9 @@ class Hydrodynamics(AbstractEffect):
     distance: float | None = eqx.field(static=True, default=None)
     bead_density: float = eqx.field(static=True, default=POLYSTYRENE_DENSITY)
     hydro_radius: np.ndarray | None = value_field("m", "> 0")
+    viscosity: float | None = eqx.field(static=True, default=None)
+    fluid_density: float | None = eqx.field(static=True, default=None)
+    bead_friction: float | None = eqx.field(static=True, default=None)
     order: ClassVar[float] = 80.0
 
     @classmethod
@@ -73,12 +80,18 @@ class Hydrodynamics(AbstractEffect):
     def to_injection(self) -> injections.HydrodynamicFriction:
         return injections.HydrodynamicFriction(self._value("hydro_radius", scalar=True),
                                                bead_density=self.bead_density,
-                                               distance=self.distance)
+                                               distance=self.distance,
+                                               viscosity=self.viscosity,
+                                               fluid_density=self.fluid_density)
 
     def __check_init__(self):
         checks = [("bead_density", self.bead_density, "kg/m^3")]
         if self.distance is not None:
             checks.append(("distance", self.distance, "m (or None: bulk)"))
+        for nm, unit in (("viscosity", "Pa s"), ("fluid_density", "kg/m^3"),
+                         ("bead_friction", "N s/m")):
+            if getattr(self, nm) is not None:
+                checks.append((nm, getattr(self, nm), f"{unit} (or None)"))
         for nm, v, unit in checks:
             try:
                 ok = not isinstance(v, bool) and 0 < float(v) < float("inf")
@@ -89,14 +102,15 @@ class Hydrodynamics(AbstractEffect):
 
     def lorentzian(self, f, sigma2, tau, temp, extras):
         radius = extras["hydro_radius"]
-        eta = water_viscosity(temp)
-        rho = water_density(temp)
+        eta = water_viscosity(temp) if self.viscosity is None else self.viscosity
+        rho = water_density(temp) if self.fluid_density is None else self.fluid_density
         k = BOLTZMANN * temp / sigma2
         gamma = tau * k
         d = BOLTZMANN * temp / gamma
         fc = k / (2.0 * jnp.pi * gamma)
         f_nu = eta / rho / (jnp.pi * radius**2)
         m_star = (4.0 / 3.0 * self.bead_density + 2.0 / 3.0 * rho) * jnp.pi * radius**3
-        f_m = gamma / (2.0 * jnp.pi * m_star)
+        g_m = gamma if self.bead_friction is None else self.bead_friction
+        f_m = g_m / (2.0 * jnp.pi * m_star)
         x = 0.0 if self.distance is None else radius / self.distance
         return hydro_lorentzian(f, d, fc, f_nu, f_m, x)

@@ -53,6 +53,7 @@ def calibrate(
     excluded_ranges=None,
     lines: str = "auto",
     robust: bool = False,
+    hydrodynamics: bool | str | None = None,
 ) -> CalibrationResult:
     """Calibrate k, gamma (D) and eps^2 with standard errors from one or more recordings.
 
@@ -98,6 +99,14 @@ def calibrate(
       subtracts them before the fit, naming them in the notes; ``"keep"`` fits the trace as
       it is.
     - `robust`: spectral fits leave out ordinates far above the fitted spectrum (spikes).
+    - `hydrodynamics`: the frequency-dependent friction of the known bead (Berg-Sorensen &
+      Flyvbjerg 2004; near a surface Tolic-Norrelykke et al. 2006): ``True`` adds the
+      ``hydrodynamics`` effect with ``hydro_radius`` held at ``bead_radius_m`` (no new
+      parameter; distance, densities and viscosity from the settings, water at T where not
+      given), ``False`` leaves it out, ``"auto"`` adds it when the bead radius is known and
+      ignoring it would bias k or gamma by more than 1/3 of their standard error (predicted
+      from the model spectra); default: the recordings' ``hydrodynamics`` setting, else
+      ``"auto"``. The notes say what was used.
 
     Positions in volts (``position_unit="V"``) give the displacement sensitivity Rd [m/V] and
     force sensitivity Rf = k Rd [N/V] as parameters ``displacement_sensitivity`` and
@@ -122,7 +131,8 @@ def calibrate(
     plan = prepare_instrument(recs, mdl, model is not None, method, fixed=fixed,
                               friction=friction, detector=detector,
                               anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
-                              lines=lines, f_range=f_range)
+                              lines=lines, f_range=f_range, hydrodynamics=hydrodynamics,
+                              likelihood=likelihood)
     res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
                      plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
                      _flag("robust", robust))

@@ -7,7 +7,9 @@ and returns a :class:`Plan`: the model, the held parameters, the cleaned recordi
 band to fit. :func:`finish_instrument` turns the fit into the reported result: for positions
 in volts the displacement sensitivity ``Rd`` [m/V] and the force sensitivity ``Rf = k Rd``
 [N/V], with the friction known (``friction="stokes"``: ``gamma = 6 pi eta R``, Faxen's factor
-near a surface) or measured by the drive; every input error propagated to first order.
+near a surface) or measured by the drive; every input error propagated to first order. With
+the bead known, the frequency-dependent (hydrodynamic) friction of :mod:`._hydro_known` joins
+the model when ``hydrodynamics`` asks for it or ("auto") when ignoring it would bias the fit.
 
 **Volts.** A trace in volts ``x_V = x / Rd`` is the trap process scaled: fitted as if it were
 in metres it gives ``k_V = k Rd^2``, ``gamma_V = gamma Rd^2`` (``tau`` and ``f_c`` are scale
@@ -30,6 +32,7 @@ import math
 import numpy as np
 
 from ._models import TrapModel
+from ._options import frequency_ranges
 
 #: the photodiode-with-anti-aliasing fit band ends here (fraction of fs) unless given: a
 #: decimating instrument's anti-alias filter starts to cut in above ~0.4-0.45 fs
@@ -140,21 +143,6 @@ def _stokes_gamma(recs, sts):
     return out[0]
 
 
-def _ranges(value, what):
-    out = []
-    for pair in value or ():
-        try:
-            a, b = (float(v) for v in pair)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what} must be a list of [f_low, f_high] pairs in Hz; got "
-                             f"{value!r}") from None
-        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
-            raise ValueError(f"{what}: each range needs 0 <= f_low < f_high (Hz); got "
-                             f"[{a!r}, {b!r}]")
-        out.append((a, b))
-    return out
-
-
 def _clean_lines(recs, sts, lines, notes, excluded):
     """Find strong lines (and the drive) in every recording and subtract them; returns the
     cleaned recordings and the drive response ``(|r|, se, f_d, exposure)`` or None."""
@@ -210,9 +198,10 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
 def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction=None,
                        detector=None, anti_aliasing=None, excluded_ranges=None, lines="auto",
-                       f_range=None) -> Plan:
+                       f_range=None, hydrodynamics=None, likelihood="auto") -> Plan:
     """The plan of a calibration from the recordings' instrument settings and calibrate's
-    arguments (which win over the settings)."""
+    arguments (which win over the settings); ``hydrodynamics``: the known bead's
+    frequency-dependent friction (:mod:`._hydro_known`)."""
     from ._fixed import parse_fixed
 
     if lines not in ("auto", "keep"):
@@ -269,15 +258,20 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
         rng = (0.0, AA_BAND * min(1.0 / float(r.frame_interval) for r in recs))
         notes.append(f"fit band 0-{rng[1]:.6g} Hz ({AA_BAND:g} fs: below the instrument's "
                      "anti-alias filter; fit_range_Hz to change it)")
-    excluded = _ranges(excluded_ranges, "excluded_ranges")
+    excluded = frequency_ranges(excluded_ranges, "excluded_ranges")
     for s in sts:
-        excluded += [r for r in _ranges(s["excluded_ranges_Hz"], "excluded_ranges_Hz")
+        excluded += [r for r in frequency_ranges(s["excluded_ranges_Hz"], "excluded_ranges_Hz")
                      if r not in excluded]
     cleaned, drive = _clean_lines(recs, sts, lines, notes, excluded)
     if volts and gamma_known is None and drive is None:
         raise ValueError("positions are in volts: the displacement sensitivity Rd (m/V) needs "
                          "the friction (friction='stokes' with the bead radius, or "
                          "fixed={'gamma': ...}) or an active calibration (a stage drive)")
+    from ._hydro_known import plan_hydrodynamics
+
+    mdl = plan_hydrodynamics(cleaned, sts, mdl, method, hydrodynamics, held, notes, volts=volts,
+                             gamma_known=gamma_known, band=rng, excluded=excluded, drive=drive,
+                             likelihood=likelihood)
     return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
                 notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit)
 

@@ -114,3 +114,20 @@ def _flag(name, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be True or False; got {name} = {value!r}")
     return bool(value)
+
+
+def frequency_ranges(value, what):
+    """``[(f_low, f_high), ...]`` [Hz] from a list of pairs (``what`` names the argument in
+    errors); each needs 0 <= f_low < f_high."""
+    out = []
+    for pair in value or ():
+        try:
+            a, b = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be a list of [f_low, f_high] pairs in Hz; got "
+                             f"{value!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+            raise ValueError(f"{what}: each range needs 0 <= f_low < f_high (Hz); got "
+                             f"[{a!r}, {b!r}]")
+        out.append((a, b))
+    return out
