@@ -17,6 +17,7 @@ Jobs (``python _redesign_worker.py JOB DIR [args]``):
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
@@ -208,11 +209,10 @@ class Cases:
         reps = -(-n_batch // y.shape[0])
         self.batch = np.tile(y, (reps, 1))[:n_batch]
         self.post = self.single[0]
-        try:  # the new tree finds and subtracts lines by default; "keep" skips that step
-            bt.calibrate(self.single[0], lines="keep")
-            self.keep = {"lines": "keep"}
-        except TypeError:  # the old tree has no line finder (and no `lines` argument)
-            self.keep = {}
+        # the new tree finds and subtracts lines by default ("keep" skips that step); the old
+        # tree has no line finder and no `lines` argument (no call here: first calls compile)
+        params = inspect.signature(bt.calibrate).parameters
+        self.keep = {"lines": "keep"} if "lines" in params else {}
 
     def run(self, case, i=0):
         if case == "calibrate":
