@@ -182,7 +182,9 @@ def test_active_calibration_in_volts_without_stokes(tmp_path, capsys, detector):
 
 
 def test_near_surface_faxen_friction(tmp_path, capsys):
-    """A bead 1.5 radii from the surface: Faxen's factor (~1.6) in the held friction."""
+    """A bead 1.5 radii from the surface: Faxen's factor (~1.6) in the held friction. The
+    generator has no frequency-dependent friction, so neither has the fit ("hydrodynamics":
+    false; the known-bead correction is tested in tests/inference/test_hydro_known_bead.py)."""
     h = 1.5 * RADIUS
     x = RADIUS / h
     faxen = 1 / (1 - 9 / 16 * x + x**3 / 8 - 45 / 256 * x**4 - x**5 / 16)
@@ -191,7 +193,8 @@ def test_near_surface_faxen_friction(tmp_path, capsys):
     xs, _ = generate(K_PD, gamma, dt, dt, 2**15, 31, temperature=T, substeps=8)
     rec = bt.Recording(xs[0], frame_interval=dt, exposure=dt, temperature=T,
                        metadata={"detector": "camera", "friction": "stokes",
-                                 "distance_to_surface_m": h, **_bead()})
+                                 "hydrodynamics": False, "distance_to_surface_m": h,
+                                 **_bead()})
     out = _cli_json(_manifest(tmp_path, rec), capsys=capsys)
     assert out["gamma"] == pytest.approx(gamma, rel=1e-6)
     assert abs(out["k"] - K_PD) < 3.5 * out["k_err"]

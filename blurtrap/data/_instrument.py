@@ -26,6 +26,7 @@ INSTRUMENT_KEYS = (
     "bead_density_kg_per_m3",
     "fluid_density_kg_per_m3",
     "friction",
+    "hydrodynamics",
     "drive",
     "fit_range_Hz",
     "excluded_ranges_Hz",
@@ -206,6 +207,12 @@ def _check_bead(v: dict, where: str, out: dict, check_units: bool) -> None:
                     "Pass kg/m^3 (water 1000, polystyrene 1050), or check_units=false"
                 )
             out[key] = rho
+    if "hydrodynamics" in v:
+        hd = v["hydrodynamics"]
+        if not (hd is True or hd is False or hd == "auto"):
+            raise ValueError(f"{where}: hydrodynamics must be \"auto\", true or false (the "
+                             f"known bead's frequency-dependent friction); got {hd!r}")
+        out["hydrodynamics"] = hd
     if "friction" in v:
         out["friction"] = _choice(where, "friction", v["friction"], FRICTIONS)
         if out["friction"] == "stokes" and radius is None:
@@ -273,6 +280,8 @@ def instrument_settings(recording) -> dict[str, Any]:
     - ``bead_radius_m`` [m], ``viscosity_Pa_s`` [Pa s], ``distance_to_surface_m`` [m],
       ``bead_density_kg_per_m3``, ``fluid_density_kg_per_m3`` [kg/m^3]: floats or None.
     - ``friction``: ``"free"`` (default: fitted) or ``"stokes"`` (fixed from the bead).
+    - ``hydrodynamics``: ``"auto"`` (default), True or False: the known bead's
+      frequency-dependent friction in the model (``calibrate(hydrodynamics=...)``).
     - ``drive``: ``{"frequency_Hz": f}`` or None; with a drive the recording has ``stage``.
     - ``fit_range_Hz``: ``(fmin, fmax)`` or None.
     - ``excluded_ranges_Hz``: a tuple of ``(a, b)`` pairs, or None.
@@ -303,6 +312,7 @@ def instrument_settings(recording) -> dict[str, Any]:
         "bead_density_kg_per_m3": None,
         "fluid_density_kg_per_m3": None,
         "friction": "free",
+        "hydrodynamics": "auto",
         "drive": None,
         "fit_range_Hz": None,
         "excluded_ranges_Hz": None,

@@ -144,7 +144,8 @@ def load_manifest(path, *, on_bad_rows: str = "error") -> RecordingSet | list[XY
     ``{"alpha": a, "f3db_Hz": f}``, photodiode only unless ``"none"``), ``bead_radius_m``
     (< 1e-3), ``viscosity_Pa_s``, ``distance_to_surface_m`` (> the radius),
     ``bead_density_kg_per_m3``, ``fluid_density_kg_per_m3``, ``friction`` (``"free"`` |
-    ``"stokes"``, which needs ``bead_radius_m``), ``drive`` (``{"frequency_Hz": f}``; the
+    ``"stokes"``, which needs ``bead_radius_m``), ``hydrodynamics`` (``"auto"`` | true |
+    false), ``drive`` (``{"frequency_Hz": f}``; the
     CSV then needs a ``stage_nm`` column), ``fit_range_Hz`` (``[fmin, fmax]``),
     ``excluded_ranges_Hz`` (``[[a, b], ...]``). They may also be given inside an entry's
     ``metadata`` object, but not in both places.

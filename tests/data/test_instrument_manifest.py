@@ -23,6 +23,7 @@ DEFAULTS = {
     "bead_density_kg_per_m3": None,
     "fluid_density_kg_per_m3": None,
     "friction": "free",
+    "hydrodynamics": "auto",
     "drive": None,
     "fit_range_Hz": None,
     "excluded_ranges_Hz": None,
@@ -119,6 +120,7 @@ def test_all_keys_together_and_instrument_keys_listed(tmp_path):
         "bead_density_kg_per_m3": 1050.0,
         "fluid_density_kg_per_m3": 1000.0,
         "friction": "stokes",
+        "hydrodynamics": False,
         "drive": {"frequency_Hz": 32.0},
         "fit_range_Hz": [10.0, 4000.0],
         "excluded_ranges_Hz": [[30.0, 34.0]],
@@ -299,3 +301,20 @@ def test_settings_from_python_metadata_and_numpy_values():
     assert got["drive"] == {"frequency_Hz": 30.0} and got["fit_range_Hz"] == (1.0, 2000.0)
     assert got["bead_radius_m"] == pytest.approx(5e-7, rel=1e-7)
     assert isinstance(got["fit_range_Hz"][0], float)
+
+
+def test_hydrodynamics_key_is_validated_and_defaults_to_auto():
+    import blurtrap as bt
+    from blurtrap.data import instrument_settings
+
+    rec = bt.Recording(np.arange(64.0) * 1e-9 % 7e-9, frame_interval=1e-3, exposure=1e-3)
+    assert instrument_settings(rec)["hydrodynamics"] == "auto"
+    for v in ("auto", True, False):
+        r = bt.Recording(rec.positions, frame_interval=1e-3, exposure=1e-3,
+                         metadata={"hydrodynamics": v})
+        assert instrument_settings(r)["hydrodynamics"] == v
+    for bad in ("yes", 1, "true"):
+        r = bt.Recording(rec.positions, frame_interval=1e-3, exposure=1e-3,
+                         metadata={"hydrodynamics": bad})
+        with pytest.raises(ValueError, match="hydrodynamics must be"):
+            instrument_settings(r)
