@@ -10,6 +10,7 @@ import numpy as np
 
 from .._constants import BOLTZMANN
 from . import _batch_checks as checks
+from ._spectral import _np_periodogram
 
 
 def _lag_moments(power, m, dt):
@@ -67,11 +68,8 @@ def _periodograms(y, n_blocks, m, dt):
     for i in range(0, y.shape[0], _HOST_ROWS):
         stats[i:i + _HOST_ROWS] = checks.row_stats(y[i:i + _HOST_ROWS])
         with np.errstate(all="ignore"):  # rows with NaN/inf are replaced in _prepare
-            blocks = y[i:i + _HOST_ROWS, : m * n_blocks].reshape(-1, n_blocks, m)
-            blocks = blocks - blocks.mean(axis=2, keepdims=True)
-            spec = np.fft.rfft(blocks, axis=2)[:, :, 1:]
             rows = out[i:i + _HOST_ROWS]
-            rows[:] = (spec.real**2 + spec.imag**2).mean(axis=1) * dt / m
+            rows[:] = _np_periodogram(y[i:i + _HOST_ROWS, : m * n_blocks], dt, n_blocks)[1]
             mom[:, i:i + _HOST_ROWS] = _lag_moments(rows, m, dt)
             avg[i:i + _HOST_ROWS] = rows.mean(axis=1)
     return out, mom, avg, stats

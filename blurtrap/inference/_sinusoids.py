@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._spectral import _np_periodogram
+
 _GRID_POINTS = 9  # refinement grid over +-half_width (0.15-bin steps for +-0.6 bin)
 _GOLDEN_STEPS = 8  # within +-half a grid step of the parabola's vertex: to 0.5 % of a step
 _NEWTON_STEPS = 3
@@ -56,11 +58,10 @@ def check_frequency(freq, dt: float, name: str) -> float:
 
 
 def periodogram(y, dt: float):
-    """Two-sided periodogram ``dt/N |FFT(y - mean)|^2`` at f_j = j/(N dt), j = 1 .. N//2
-    (batched over leading axes): ``(f, power)``."""
-    n = y.shape[-1]
-    spec = np.fft.rfft(y - y.mean(axis=-1, keepdims=True), axis=-1)[..., 1:]
-    return np.arange(1, n // 2 + 1) / (n * dt), (spec.real**2 + spec.imag**2) * (dt / n)
+    """Periodogram ``dt/N |FFT(y - mean)|^2`` at f_j = j/(N dt), j = 1 .. N//2 (batched over
+    leading axes): ``(f, power)`` (:func:`blurtrap.inference._spectral._np_periodogram`)."""
+    f, p, _ = _np_periodogram(y, dt)
+    return f, p
 
 
 def centred_time(n: int, dt: float):

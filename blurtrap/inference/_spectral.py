@@ -15,20 +15,24 @@ from ._problems import SpectralArgs, bucket_length, rec_meta, spectral_model_psd
 
 def _np_periodogram(y, dt, n_blocks=1):
     """``(f [Hz], P [m^2/Hz], M)``: the average periodogram of ``n_blocks`` blocks of M
-    frames, on the host. A numpy twin of :func:`._likelihood.block_periodogram` (tests hold
-    them equal), kept because the JAX one compiles anew for every record length and block
-    count (0.2-0.4 s jitted, ~1 s eager; benchmarks/bench_host_twins.py)."""
+    frames (mean removed per block, ordinates j = 1 .. M//2, ``dt/M |FFT|^2``), on the host,
+    batched over leading axes of ``y``. A numpy twin of :func:`._likelihood.block_periodogram`
+    (tests hold them equal), kept because the JAX one compiles anew for every record length
+    and block count (0.2-0.4 s jitted, ~1 s eager; benchmarks/bench_host_twins.py); the one
+    host-side periodogram of the package (calibrate, calibrate_batch, the line finder and the
+    drive response use it)."""
     y = np.asarray(y, dtype=float)
-    m = y.size // n_blocks
+    n = y.shape[-1]
+    m = n // n_blocks
     if m < 4:
         raise ValueError(
-            f"n_blocks = {n_blocks} leaves {m} frames per block for a record of {y.size} "
+            f"n_blocks = {n_blocks} leaves {m} frames per block for a record of {n} "
             "frames; need at least 4 frames per block"
         )
-    blocks = y[: m * n_blocks].reshape(n_blocks, m)
-    blocks = blocks - blocks.mean(axis=1, keepdims=True)
-    spec = np.fft.rfft(blocks, axis=1)[:, 1:]
-    p = (spec.real**2 + spec.imag**2).mean(axis=0) * dt / m
+    blocks = y[..., : m * n_blocks].reshape(*y.shape[:-1], n_blocks, m)
+    blocks = blocks - blocks.mean(axis=-1, keepdims=True)
+    spec = np.fft.rfft(blocks, axis=-1)[..., 1:]
+    p = (spec.real**2 + spec.imag**2).mean(axis=-2) * dt / m
     f = np.arange(1, m // 2 + 1) / (m * dt)
     return f, p, m
 
