@@ -13,6 +13,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from ._values import thaw
 
 #: the instrument keys, in the order the manifest documents them
@@ -209,6 +211,8 @@ def _check_bead(v: dict, where: str, out: dict, check_units: bool) -> None:
             out[key] = rho
     if "hydrodynamics" in v:
         hd = v["hydrodynamics"]
+        if isinstance(hd, np.bool_):
+            hd = bool(hd)  # e.g. read from HDF5 attributes
         if not (hd is True or hd is False or hd == "auto"):
             raise ValueError(f"{where}: hydrodynamics must be \"auto\", true or false (the "
                              f"known bead's frequency-dependent friction); got {hd!r}")

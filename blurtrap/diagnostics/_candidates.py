@@ -55,18 +55,20 @@ def _check_candidates(candidates):
     (an effect class counts as its name)."""
     if candidates is None:
         return None
-    if isinstance(candidates, (str, AbstractEffect)):
+    if isinstance(candidates, (str, AbstractEffect)) or (
+            isinstance(candidates, type) and issubclass(candidates, AbstractEffect)):
         candidates = [candidates]
     valid = valid_candidates()
     try:
-        items = list(candidates)
+        items = list(candidates)  # pyright: ignore[reportArgumentType]  # checked here
     except TypeError:
         raise ValueError(f"candidates must be a list of effect names from {list(valid)} or "
                          f"effect objects; got {candidates!r}") from None
     items = [c.name if isinstance(c, type) and issubclass(c, AbstractEffect) else c
              for c in items]
     bad = [c for c in items if (c not in valid if isinstance(c, str)
-                                else not (isinstance(c, AbstractEffect) and c.diagnose_test))]
+                                else not (isinstance(c, AbstractEffect) and c.diagnose_test
+                                          and c.name in valid))]
     if bad:
         raise ValueError(f"candidates: unknown effect name(s) or object(s) {bad}; valid names "
                          f"are {list(valid)}, or effect objects from blurtrap.effects")

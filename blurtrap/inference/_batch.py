@@ -241,7 +241,7 @@ def _batch_mesh(shard):
     if not (isinstance(shard, (bool, np.bool_)) or (isinstance(shard, str) and shard == "auto")):
         raise ValueError(f"shard must be 'auto', True or False; got shard = {shard!r}")
     devices = jax.local_devices()
-    if shard is False or len(devices) < 2:
+    if (isinstance(shard, (bool, np.bool_)) and not shard) or len(devices) < 2:
         return None
     return Mesh(np.asarray(devices), ("batch",))
 

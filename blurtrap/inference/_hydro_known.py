@@ -61,7 +61,10 @@ _SE_VALID = 0.25
 
 def check_hydrodynamics(value, what="hydrodynamics"):
     """``value`` if it is None, "auto", True or False; a ValueError naming it otherwise."""
-    if value is None or value is True or value is False or value == "auto":
+    if isinstance(value, np.bool_):
+        value = bool(value)
+    if value is None or value is True or value is False or (isinstance(value, str)
+                                                          and value == "auto"):
         return value
     raise ValueError(f"{what} must be None (the recordings' setting), 'auto', True or False; "
                      f"got {what} = {value!r}")
@@ -293,9 +296,10 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
     else:
         ratio, bias = _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts)
         if ratio == 0.0:
-            notes.append("hydrodynamics: off (auto): the corner frequency is not inside the "
-                         "fitted band (dt >~ tau), where the correction's size is not "
-                         "predicted; hydrodynamics=True to include it")
+            notes.append("hydrodynamics: off (auto): the correction's size could not be "
+                         "predicted (the corner frequency is not inside the fitted band, dt >~ "
+                         "tau, or the record determines k and gamma too poorly for the "
+                         "linearised prediction); hydrodynamics=True to include it")
             return model
         pred = (f"ignoring it would bias k by {np.expm1(bias[0]) * 100:+.2g} %"
                 + ("" if np.isnan(bias[1]) else

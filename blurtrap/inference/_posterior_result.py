@@ -268,7 +268,7 @@ class Posterior:
 def _thinned_steps(n_kept: int, n_walkers: int, max_draws: int | None) -> np.ndarray:
     """Indices of the kept steps: all, or evenly thinned (the last kept) so that
     ``n_walkers x len(steps) <= max_draws``."""
-    if max_draws is None:
+    if max_draws is None or n_kept == 0:
         return np.arange(n_kept)
     if isinstance(max_draws, bool) or not isinstance(max_draws, (int, np.integer)) \
             or max_draws < n_walkers:

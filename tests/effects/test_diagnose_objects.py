@@ -96,3 +96,11 @@ def test_object_values_start_the_screening_fit():
                                  fx.TrackingNoise(tracking_var=[1e-18, 2e-18]), "aliasing"))
     assert start == {**warm, "drift_diffusion": 3e-16}
     assert warm == {"k": 5e-5, "gamma": 2.7e-8}  # not modified
+
+
+def test_a_single_effect_class_is_one_candidate():
+    from blurtrap.diagnostics._candidates import _check_candidates
+    from blurtrap.effects import Drift
+
+    assert _check_candidates(Drift) == ["drift"]
+    assert _check_candidates([Drift, "line_noise"]) == ["drift", "line_noise"]

@@ -71,7 +71,7 @@ def test_one_device_is_no_mesh_and_bad_shard_is_named():
     from blurtrap.inference import _batch
 
     assert _batch._batch_mesh(True) is None or len(_batch.jax.local_devices()) > 1
-    assert _batch._batch_mesh(False) is None
+    assert _batch._batch_mesh(False) is None and _batch._batch_mesh(np.False_) is None
     for bad in ("yes", 1, None):
         with pytest.raises(ValueError, match="shard must be 'auto', True or False"):
             blurtrap.calibrate_batch(np.zeros((2, 64)), frame_interval=1e-3, exposure=1e-3,
@@ -86,7 +86,8 @@ def test_progress_bar_advances_per_chunk(capsys, monkeypatch):
     y = rng.normal(size=(10, 512)) * 1e-8
     for i in range(1, 512):
         y[:, i] += 0.5 * y[:, i - 1]
-    blurtrap.calibrate_batch(y, frame_interval=1e-3, exposure=1e-3, progress=True)
+    blurtrap.calibrate_batch(y, frame_interval=1e-3, exposure=1e-3, progress=True,
+                             shard=False)  # 3 chunks of 4 rows on one device
     err = capsys.readouterr().err
     assert "calibrate_batch" in err and all(f"| {i}/3 [" in err for i in range(4)), err
     blurtrap.calibrate_batch(y, frame_interval=1e-3, exposure=1e-3)

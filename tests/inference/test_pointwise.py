@@ -133,6 +133,9 @@ def test_log_likelihood_of_the_draws_and_thinning(post):
     v2, _, _, st2 = post.log_likelihood(max_draws=40)
     assert v2.shape[1] == len(st2) <= 5 and st2[-1] == n_kept - 1
     assert np.allclose(v2, vals[:, st2], rtol=1e-12)
+    from blurtrap.inference._posterior_result import _thinned_steps
+
+    assert _thinned_steps(0, 8, 40).size == 0  # nothing kept: nothing to thin
     for bad in (3, 2.5, True):
         with pytest.raises(ValueError, match="max_draws"):
             post.log_likelihood(max_draws=bad)
