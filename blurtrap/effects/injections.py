@@ -263,7 +263,9 @@ class TrapezoidProfile(eqx.Module):
 _MODES = ("fluid", "additive")
 
 
-def _scalar(name, value, unit, positive):
+def check_scalar(name, value, unit, positive):
+    """``value`` as a float: a finite scalar, > 0 (`positive`) or >= 0; else a ValueError
+    naming it, its value and the rule."""
     arr = np.asarray(value, dtype=np.float64)
     ok = arr.ndim == 0 and np.isfinite(arr) and (arr > 0 if positive else arr >= 0)
     if not ok:
@@ -293,8 +295,8 @@ class StageDrive(eqx.Module):
     name = "stage_drive"
 
     def __init__(self, amplitude, frequency, phase=0.0, mode="fluid"):
-        self.amplitude = _scalar("amplitude", amplitude, "m", positive=False)
-        self.frequency = _scalar("frequency", frequency, "Hz", positive=True)
+        self.amplitude = check_scalar("amplitude", amplitude, "m", positive=False)
+        self.frequency = check_scalar("frequency", frequency, "Hz", positive=True)
         ph = np.asarray(phase, dtype=np.float64)
         if ph.ndim != 0 or not np.isfinite(ph):
             raise ValueError(f"phase must be a finite scalar [rad]; got phase = {phase!r}")

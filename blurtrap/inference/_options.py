@@ -53,14 +53,7 @@ def _check_f_range(recs, method, likelihood, f_range):
         raise ValueError(f"f_range = {f_range!r} applies only to the spectral methods "
                          "(method='psd', or the Whittle likelihood); got method = "
                          f"{method!r}, likelihood = {likelihood!r}")
-    try:
-        lo, hi = (float(v) for v in f_range)
-    except (TypeError, ValueError):
-        raise ValueError(f"f_range must be two numbers (f_min, f_max) in Hz; got "
-                         f"f_range = {f_range!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
-        raise ValueError(f"f_range must satisfy 0 <= f_min < f_max (finite, Hz); got "
-                         f"f_range = ({lo!r}, {hi!r})")
+    lo, hi = frequency_pair(f_range, "f_range")
     nyq = max(0.5 / float(r.frame_interval) for r in recs)
     if lo >= nyq:
         raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz starts above the Nyquist "
@@ -119,15 +112,23 @@ def _flag(name, value) -> bool:
 def frequency_ranges(value, what):
     """``[(f_low, f_high), ...]`` [Hz] from a list of pairs (``what`` names the argument in
     errors); each needs 0 <= f_low < f_high."""
-    out = []
-    for pair in value or ():
-        try:
-            a, b = (float(v) for v in pair)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what} must be a list of [f_low, f_high] pairs in Hz; got "
-                             f"{value!r}") from None
-        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
-            raise ValueError(f"{what}: each range needs 0 <= f_low < f_high (Hz); got "
-                             f"[{a!r}, {b!r}]")
-        out.append((a, b))
-    return out
+    try:
+        pairs = list(value or ())
+    except TypeError:
+        raise ValueError(f"{what} must be a list of [f_low, f_high] pairs in Hz; got "
+                         f"{value!r}") from None
+    return [frequency_pair(pair, f"{what}[{i}]") for i, pair in enumerate(pairs)]
+
+
+def frequency_pair(pair, what):
+    """``(f_low, f_high)`` floats [Hz] from two numbers with 0 <= f_low < f_high (finite);
+    errors name ``what`` and the value."""
+    try:
+        lo, hi = (float(v) for v in pair)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be two numbers (f_low, f_high) in Hz; got "
+                         f"{what} = {pair!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+        raise ValueError(f"{what} must satisfy 0 <= f_low < f_high (finite, Hz); got "
+                         f"{what} = ({lo!r}, {hi!r})")
+    return lo, hi

@@ -40,15 +40,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..effects.injections import StageDrive as StageDrive
-
-
-def _scalar(name, value, unit, positive):
-    arr = np.asarray(value, dtype=np.float64)
-    ok = arr.ndim == 0 and np.isfinite(arr) and (arr > 0 if positive else arr >= 0)
-    if not ok:
-        rule = "> 0" if positive else ">= 0"
-        raise ValueError(f"{name} must be a finite scalar {rule} {unit}; got {name} = {value!r} {unit}")
-    return float(arr)
+from ..effects.injections import check_scalar as _scalar
 
 
 class Sensitivity(eqx.Module):
