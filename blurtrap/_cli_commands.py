@@ -292,6 +292,8 @@ def design_command(args) -> int:
                  dead_time=args.dead_time_ms * 1e-3, n_frames=args.frames,
                  total_time=args.total_s, tracking_std=args.tracking_nm * 1e-9,
                  photon_limited=args.photon_limited, target=args.target,
+                 friction_error=(None if args.friction_error is None
+                                 else args.friction_error / 100.0),
                  series=tuple(args.series))
     if args.plot:
         import matplotlib

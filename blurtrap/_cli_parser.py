@@ -230,8 +230,14 @@ def _add_design_parser(sub):
                    help="tracking-error rms [nm] (default 0)")
     d.add_argument("--photon-limited", action="store_true",
                    help="tracking error grows as sqrt(1/W) below the reference exposure")
-    d.add_argument("--target", choices=("k", "gamma", "both"), default="k",
-                   help="what to minimise the SE of (default k)")
+    d.add_argument("--target", choices=("k", "gamma", "both", "determinant",
+                                        "force_sensitivity"), default="k",
+                   help="what to minimise the SE of (default k; determinant: of k and gamma "
+                   "together; force_sensitivity: Rf of a passive calibration in volts, needs "
+                   "--friction-error)")
+    d.add_argument("--friction-error", type=float, default=None, metavar="PCT",
+                   help="the friction is known from the bead (Stokes) to this relative error "
+                   "[%%] (0 = exactly) instead of fitted; makes dt >> tau designs possible")
     d.add_argument("--series", type=int, nargs="+", default=(1, 2, 3), metavar="N",
                    help="numbers of exposures to try at a common frame interval (default "
                    "1 2 3; 1 = one recording)")

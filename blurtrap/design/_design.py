@@ -11,7 +11,6 @@ fastest frame rate, the paper's series) are compared on the same objective.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import equinox as eqx
@@ -23,83 +22,21 @@ import optimistix as optx
 from .._config import float64_scope
 from ..physics import BOLTZMANN, water_viscosity
 from ._fisher import whittle_information
+from ._result import Acquisition, DesignResult
 
-TARGETS = ("k", "gamma", "both")
+TARGETS = ("k", "gamma", "both", "determinant", "force_sensitivity")
+#: the relative SE standing for "exactly known friction" (its prior precision 1/SE^2 makes the
+#: fit's log gamma fixed to rounding; the information of the data is ~1e4-1e10)
+_EXACT_FRICTION_SE = 1e-12
 #: a relative SE of k or gamma above this (100 %) means the design does not identify it
 UNIDENTIFIED_SE = 1.0
 #: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
 PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
 
 
-@dataclasses.dataclass(frozen=True)
-class Acquisition:
-    """One candidate: recordings as (frame_interval [s], exposure [s], n_frames), the predicted
-    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective."""
-
-    label: str
-    recordings: tuple
-    predicted_se: dict  # name -> relative SE (fraction) at each k of the range
-    objective: float
-
-    def to_dict(self) -> dict:
-        return {"label": self.label, "objective": self.objective,
-                "recordings": [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
-                               for r in self.recordings],
-                "predicted_relative_se": {n: [float(x) for x in v]
-                                          for n, v in self.predicted_se.items()}}
-
-
-@dataclasses.dataclass(frozen=True)
-class DesignResult:
-    """Result of :func:`design`: the recommended acquisition (``best``), every candidate
-    compared (``candidates``, best first) and the settings used (SI)."""
-
-    best: Acquisition
-    candidates: tuple
-    target: str
-    k: tuple
-    settings: dict
-
-    @property
-    def predicted_se(self) -> dict:
-        """Relative SE of each parameter for the recommended design (worst over the k range)."""
-        return {n: float(np.max(v)) for n, v in self.best.predicted_se.items()}
-
-    def plot(self, ax=None):
-        """Predicted SE against exposure and frame interval, candidates marked
-        (:func:`blurtrap.plotting.design_se`; imports matplotlib). Returns the figure."""
-        from ..plotting import design_se
-
-        return design_se(self, ax=ax)
-
-    def to_dict(self) -> dict:
-        return {"target": self.target, "k_N_per_m": list(self.k), "settings": self.settings,
-                "best": self.best.to_dict(),
-                "candidates": [c.to_dict() for c in self.candidates]}
-
-    def summary(self) -> str:
-        lines = [f"experiment design: minimise the SE of {self.target} (worst case over k = "
-                 + ", ".join(f"{k * 1e3:.3g}" for k in self.k) + " pN/nm)",
-                 f"  {'candidate':<34s} {'recordings (dt ms / W ms / frames)':<44s}"
-                 f" {'SE k %':>8s} {'SE gamma %':>11s}"]
-        for c in self.candidates:
-            recs = "; ".join(f"{r[0] * 1e3:.3g}/{r[1] * 1e3:.3g}/{int(r[2])}"
-                             for r in c.recordings)
-            if len(recs) > 44:
-                recs = recs[:41] + "..."
-            mark = "*" if c is self.best else " "
-            lines.append(f"{mark} {c.label:<34s} {recs:<44s} "
-                         f"{100 * np.max(c.predicted_se['k']):8.3g} "
-                         f"{100 * np.max(c.predicted_se['gamma']):11.3g}")
-        lines.append("(* recommended; SEs from the Whittle Fisher information, relative, "
-                     "worst over the k range)")
-        return "\n".join(lines)
-
-
-def relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise):
-    """Relative SEs (n_k, n_par) of log k, log gamma[, log eps^2] of the recordings ``recs``
-    ((dt, W, N) each; shared k, gamma, eps^2) at each stiffness in ``ks``: one vmapped
-    evaluation over recordings and stiffnesses (jitted below for the host-side candidates)."""
+def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise):
+    """Whittle information (n_k, n_par, n_par) of the recordings ``recs`` ((dt, W, N) each;
+    shared k, gamma, eps^2) per stiffness in ``ks``, in (log k, log gamma[, log eps^2])."""
     dts, ws, ns = (jnp.stack([jnp.asarray(r[i], dtype=float) for r in recs]) for i in range(3))
 
     def info(k):
@@ -109,21 +46,63 @@ def relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, n
 
         return jnp.sum(jax.vmap(one)(dts, ws, ns), axis=0)
 
-    infos = jax.vmap(info)(jnp.asarray(ks))
-    return jnp.sqrt(jnp.diagonal(jnp.linalg.inv(infos), axis1=-2, axis2=-1))
+    return jax.vmap(info)(jnp.asarray(ks))
 
 
-_relative_se_jit = jax.jit(relative_se, static_argnames=("photon_limited", "noise"))
+def _with_friction_prior(infos, friction_se):
+    """The information plus a known friction's: precision ``1 / friction_se^2`` on log gamma
+    (``friction_se`` < 0: friction fitted freely, nothing added)."""
+    prec = jnp.where(friction_se < 0, 0.0,
+                     1.0 / jnp.maximum(friction_se, _EXACT_FRICTION_SE) ** 2)
+    return infos.at[:, 1, 1].add(prec)
 
 
-def _objective_from_se(se, target):
+def relative_covariance(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise,
+                        friction_se=-1.0):
+    """Covariance (n_k, n_par, n_par) of log k, log gamma[, log eps^2] at each stiffness in
+    ``ks`` (inverse Whittle information; ``friction_se`` >= 0: the friction is known to that
+    relative SE, 0 = exactly, and enters as prior information on log gamma)."""
+    infos = _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
+    return jnp.linalg.inv(_with_friction_prior(infos, jnp.asarray(friction_se, dtype=float)))
+
+
+def relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise,
+                friction_se=-1.0):
+    """Relative SEs (n_k, n_par) of log k, log gamma[, log eps^2] of the recordings ``recs``
+    ((dt, W, N) each; shared k, gamma, eps^2) at each stiffness in ``ks``: one vmapped
+    evaluation over recordings and stiffnesses (jitted below for the host-side candidates).
+    ``friction_se``: as :func:`relative_covariance`."""
+    cov = relative_covariance(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
+                              noise, friction_se)
+    return jnp.sqrt(jnp.diagonal(cov, axis1=-2, axis2=-1))
+
+
+def force_sensitivity_se(free_cov, friction_se):
+    """Relative SE of the force sensitivity Rf = k Rd of a passive calibration in detector
+    units (volts) with the friction gamma0 known to relative SE ``friction_se``: the fit in
+    volts has k' = k Rd^2 and gamma' = gamma0 Rd^2 free, so Rf = k' sqrt(gamma0 / gamma') and
+    var(log Rf) = v_kk + v_gg / 4 - v_kg + friction_se^2 / 4 (``free_cov``: covariance of the
+    free-friction fit, (n_k, n_par, n_par))."""
+    v = free_cov[:, 0, 0] + free_cov[:, 1, 1] / 4.0 - free_cov[:, 0, 1]
+    return jnp.sqrt(v + jnp.maximum(friction_se, 0.0) ** 2 / 4.0)
+
+
+def _target_per_k(infos, target, friction_se):
+    """The target's relative SE at each stiffness, from the data's information."""
+    if target == "force_sensitivity":
+        return force_sensitivity_se(jnp.linalg.inv(infos), friction_se)
+    cov = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
     if target == "k":
-        per_k = se[:, 0]
-    elif target == "gamma":
-        per_k = se[:, 1]
-    else:
-        per_k = jnp.sqrt(se[:, 0] * se[:, 1])
-    return jnp.max(per_k)
+        return jnp.sqrt(cov[:, 0, 0])
+    if target == "gamma":
+        return jnp.sqrt(cov[:, 1, 1])
+    if target == "both":
+        return (cov[:, 0, 0] * cov[:, 1, 1]) ** 0.25
+    return jnp.linalg.det(cov[:, :2, :2]) ** 0.25  # determinant (D-optimal), SE units
+
+
+def _objective(infos, target, friction_se):
+    return jnp.max(_target_per_k(infos, target, friction_se))
 
 
 class _Problem(eqx.Module):
@@ -139,6 +118,7 @@ class _Problem(eqx.Module):
     temperature: jax.Array
     eps_ref2: jax.Array
     w_ref: jax.Array
+    friction_se: jax.Array  # < 0: friction fitted; >= 0: known to this relative SE
     n_exp: int = eqx.field(static=True)
     total_time: bool = eqx.field(static=True)
     photon_limited: bool = eqx.field(static=True)
@@ -154,9 +134,9 @@ class _Problem(eqx.Module):
 
 
 def _log_objective(u, prob: _Problem):
-    se = relative_se(prob.recs(u), prob.ks, prob.gamma, prob.temperature, prob.eps_ref2,
-                      prob.w_ref, prob.photon_limited, prob.noise)
-    return jnp.log(_objective_from_se(se, prob.target))
+    infos = _informations(prob.recs(u), prob.ks, prob.gamma, prob.temperature, prob.eps_ref2,
+                          prob.w_ref, prob.photon_limited, prob.noise)
+    return jnp.log(_objective(infos, prob.target, prob.friction_se))
 
 
 @eqx.filter_jit
@@ -172,21 +152,47 @@ def _minimise_all(prob: _Problem, starts):
     return jax.vmap(one)(starts)
 
 
+def _evaluate(recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se, *, photon_limited,
+              noise, target):
+    """Relative SEs (n_k, n_par) with the friction prior, the force sensitivity's (n_k,) and
+    the objective of one candidate (one compiled program per static setting)."""
+    infos = _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
+    cov = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
+    free = jnp.linalg.inv(infos)
+    se = jnp.sqrt(jnp.diagonal(cov, axis1=-2, axis2=-1))
+    free_se = jnp.sqrt(jnp.diagonal(free, axis1=-2, axis2=-1))
+    return se, free_se, force_sensitivity_se(free, friction_se), _objective(infos, target,
+                                                                              friction_se)
+
+
+_evaluate_jit = jax.jit(_evaluate, static_argnames=("photon_limited", "noise", "target"))
+
+
 def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
-                 target):
+                 target, friction_se=-1.0):
     recs = tuple((float(dt), float(w), float(n)) for dt, w, n in recs)
-    se = np.asarray(_relative_se_jit(recs, ks, gamma, temperature, eps_ref2, w_ref,
-                                     photon_limited=photon_limited, noise=eps_ref2 > 0))
+    se, free_se, fs, obj = _evaluate_jit(recs, ks, gamma, temperature, eps_ref2, w_ref,
+                                         friction_se, photon_limited=photon_limited,
+                                         noise=eps_ref2 > 0, target=target)
+    se, free_se, fs, obj = np.asarray(se), np.asarray(free_se), np.asarray(fs), float(obj)
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
-    obj = float(_objective_from_se(jnp.asarray(se), target))
-    core = se[:, :2]
+    predicted = {n: se[:, i] for i, n in enumerate(names)}
+    known = friction_se >= 0
+    if friction_se == 0:
+        predicted["gamma"] = np.zeros_like(se[:, 1])  # known exactly (the prior's 1e-12)
+    if known:
+        predicted["force_sensitivity"] = fs
+    # what must be identified: k, and gamma unless the friction is known; for the force
+    # sensitivity the volts fit's k' and gamma' (free friction), whatever gamma0's SE
+    free_gamma = not known or target == "force_sensitivity"
+    core = free_se[:, :2] if target == "force_sensitivity" else se[:, :2 if free_gamma else 1]
     if not np.all(np.isfinite(core)) or np.any(core > UNIDENTIFIED_SE) or not np.isfinite(obj):
         # k or gamma not identified (dt >> tau on one exposure, a near-singular information):
         # the SE of the target alone would be a confident-looking number of a fit that cannot
         # be made, so such a design is never recommended
         obj = math.inf
-        label += " (k or gamma not identified)"
-    return Acquisition(label, recs, {n: se[:, i] for i, n in enumerate(names)}, obj)
+        label += " (k or gamma not identified)" if free_gamma else " (k not identified)"
+    return Acquisition(label, recs, predicted, obj)
 
 
 def _check(name, value, lo=0.0, unit=""):
@@ -196,17 +202,48 @@ def _check(name, value, lo=0.0, unit=""):
     return float(value)
 
 
+def _checked_friction(target, friction_error) -> float:
+    """The target and the friction prior checked: ``friction_se`` (< 0: friction fitted)."""
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}; got target = {target!r}")
+    if friction_error is None:
+        if target == "force_sensitivity":
+            raise ValueError("target='force_sensitivity' is the passive calibration in volts "
+                             "with the friction known from the bead: give friction_error (its "
+                             "relative SE, >= 0)")
+    else:
+        if (isinstance(friction_error, bool) or not np.isfinite(friction_error)
+                or friction_error < 0):
+            raise ValueError(f"friction_error must be a relative SE >= 0 (or None: friction "
+                             f"fitted); got friction_error = {friction_error!r}")
+        if friction_error == 0 and target in ("gamma", "both", "determinant"):
+            raise ValueError(f"target={target!r} needs the SE of gamma, but friction_error = 0 "
+                             "says gamma is known exactly; use target='k' or "
+                             "'force_sensitivity', or give friction_error > 0")
+    return -1.0 if friction_error is None else float(friction_error)
+
+
+def _checked_noise(tracking_std, photon_limited) -> float:
+    """eps_ref^2 [m^2] from the tracking-error rms, checked."""
+    if tracking_std < 0 or not np.isfinite(tracking_std):
+        raise ValueError(f"tracking_std must be >= 0 [m]; got {tracking_std!r}")
+    if photon_limited and tracking_std == 0:
+        raise ValueError("photon_limited needs tracking_std > 0 at the reference exposure")
+    return float(tracking_std) ** 2
+
+
 def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time: float,
                budget: float, by_time: bool) -> Acquisition | None:
     """The best series of ``n_exp`` exposures at a common frame interval, from a few starts
     (None when no start gives a finite objective)."""
-    ks, gamma, temperature, eps_ref2, w_ref, photon_limited, target = common
+    ks, gamma, temperature, eps_ref2, w_ref, photon_limited, target, friction_se = common
     prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
                     dead=jnp.asarray(dead_time),
                     budget=jnp.asarray(budget),
                     ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
                     temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
-                    w_ref=jnp.asarray(w_ref), n_exp=n_exp,
+                    w_ref=jnp.asarray(w_ref), friction_se=jnp.asarray(friction_se),
+                    n_exp=n_exp,
                     total_time=by_time, photon_limited=photon_limited,
                     target=target, noise=eps_ref2 > 0)
     spread = np.linspace(-2.0, 2.0, n_exp) if n_exp > 1 else np.zeros(1)
@@ -228,7 +265,8 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
            n_frames: int | None = None, total_time: float | None = None,
            tracking_std: float = 0.0, photon_limited: bool = False,
            reference_exposure: float | None = None, target: str = "k",
-           current=None, series=(1, 2, 3)) -> DesignResult:
+           friction_error: float | None = None, current=None,
+           series=(1, 2, 3)) -> DesignResult:
     """Recommend an acquisition that minimises the expected (Cramer-Rao) error.
 
     **Arguments** (SI):
@@ -242,15 +280,23 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     - `tracking_std` [m]: tracking-error rms; with `photon_limited` it scales as
       ``sqrt(reference_exposure / W)`` (default reference: 1/max_fps), what makes short
       exposures costly on a real camera.
-    - `target`: ``"k"``, ``"gamma"`` or ``"both"`` (geometric mean of the two relative SEs).
+    - `target`: ``"k"``, ``"gamma"``, ``"both"`` (geometric mean of the two relative SEs),
+      ``"determinant"`` (D-optimal: det of the covariance of log k and log gamma, to the 1/4
+      power, so also a relative SE), or ``"force_sensitivity"`` (Rf = k Rd of a passive
+      calibration in volts with the friction known from the bead: needs `friction_error`).
+    - `friction_error`: None (default): gamma is fitted with k; a number >= 0: the friction is
+      known (Stokes from the bead, or given) to this relative SE (0 = exactly; e.g. 0.06 for a
+      radius known to 3 %... plus viscosity), as calibrate does with ``friction="stokes"`` or
+      ``fixed={"gamma": ...}``. This is what makes dt >> tau usable: there one recording
+      cannot separate k from gamma, but with gamma known only k (and eps^2) must be
+      identified. ``predicted_se`` then also has ``"force_sensitivity"``.
     - `current`: the user's design, ``[(frame_interval, exposure, n_frames), ...]``.
     - `series`: numbers of exposures to try at a common frame interval (1 = single recording).
 
     **Returns:** :class:`DesignResult` (``best``, ``predicted_se``, ``summary()``,
     ``to_dict()``).
     """
-    if target not in TARGETS:
-        raise ValueError(f"target must be one of {TARGETS}; got target = {target!r}")
+    friction_se = _checked_friction(target, friction_error)
     ks = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
     if len(ks) == 2:
         ks = tuple(np.geomspace(ks[0], ks[1], 3))
@@ -276,13 +322,9 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     if not (0.0 <= dead_time < dt_min - w_min):
         raise ValueError(f"dead_time must be in [0, 1/max_fps - min_exposure) = [0, "
                          f"{dt_min - w_min:.3g}) s; got dead_time = {dead_time!r}")
-    if tracking_std < 0 or not np.isfinite(tracking_std):
-        raise ValueError(f"tracking_std must be >= 0 [m]; got {tracking_std!r}")
-    if photon_limited and tracking_std == 0:
-        raise ValueError("photon_limited needs tracking_std > 0 at the reference exposure")
-    eps_ref2 = float(tracking_std) ** 2
+    eps_ref2 = _checked_noise(tracking_std, photon_limited)
     w_ref = float(reference_exposure) if reference_exposure is not None else dt_min
-    common = (ks, gamma, temperature, eps_ref2, w_ref, bool(photon_limited), target)
+    common = (ks, gamma, temperature, eps_ref2, w_ref, bool(photon_limited), target, friction_se)
 
     def n_each(n_rec):
         return total_time / dt_min / n_rec if total_time is not None else n_frames
@@ -310,14 +352,17 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
             cands.append(best)
     cands.sort(key=lambda c: c.objective)  # unidentified designs (objective inf) last
     if not math.isfinite(cands[0].objective):
-        raise ValueError("no candidate design identifies both k and gamma under these "
-                         "constraints (dt >> tau at the fastest frame rate?): allow a faster "
-                         "frame rate or shorter exposures, or give gamma from the bead size "
-                         "and calibrate k by blur-corrected equipartition")
+        what = "both k and gamma" if friction_se < 0 or target == "force_sensitivity" else "k"
+        raise ValueError(f"no candidate design identifies {what} under these constraints "
+                         "(dt >> tau at the fastest frame rate?): allow a faster frame rate or "
+                         "shorter exposures" + (", or give the friction from the bead size "
+                                                "(friction_error=...) and calibrate k with it"
+                                                if friction_se < 0 else ""))
     settings = {"gamma_N_s_per_m": gamma, "temperature_K": temperature, "max_fps_Hz": max_fps,
                 "min_exposure_s": w_min, "dead_time_s": dead_time, "n_frames": n_frames,
                 "total_time_s": total_time, "tracking_std_m": tracking_std,
                 "photon_limited": bool(photon_limited), "reference_exposure_s": w_ref,
+                "friction_error": friction_error,
                 "kT_J": BOLTZMANN * temperature}
     return DesignResult(best=cands[0], candidates=tuple(cands), target=target, k=ks,
                         settings=settings)

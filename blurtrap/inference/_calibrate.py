@@ -220,7 +220,7 @@ def _auto_choice(recs, mdl, k, fixed, diffusion, pade, notes):
         notes.append("auto: frames resolve the trap relaxation (lag-1 correlation "
                      f"{best:.1f} standard errors above 0); joint likelihood")
     elif "gamma" in fixed:
-        if mdl.noise and "tracking_var" not in fixed:
+        if mdl.noise and "tracking_var" not in fixed and n_exp < 2:
             raise FitError(
                 f"the frames carry no temporal information (lag-1 correlation only "
                 f"{best:.1f} standard errors above 0: dt >> tau, W < dt): with gamma known, "
@@ -231,7 +231,9 @@ def _auto_choice(recs, mdl, k, fixed, diffusion, pade, notes):
         notes.append(f"auto: frames carry little temporal information (lag-1 correlation "
                      f"{best:.1f} standard errors above 0: dt >> tau); gamma is held at the "
                      "given friction, so the joint likelihood gives k from the "
-                     "blur-corrected variance")
+                     "blur-corrected variance"
+                     + (f" (the {n_exp} exposures blur it differently, which separates k "
+                        "from eps^2)" if mdl.noise and "tracking_var" not in fixed else ""))
     elif n_exp >= 3:
         notes.append(f"auto: frames are nearly independent (dt >> tau); gamma is "
                      f"identified by the {n_exp} exposures (variance-vs-exposure "

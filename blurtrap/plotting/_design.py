@@ -26,31 +26,39 @@ def _single_se(result, exposures, intervals):
     out = _grid_se()(np.asarray(exposures, dtype=float), np.asarray(intervals, dtype=float),
                    np.asarray(result.k, dtype=float), float(s["gamma_N_s_per_m"]),
                    float(s["temperature_K"]), eps_ref2, float(s["reference_exposure_s"]),
-                   budget, photon=bool(s["photon_limited"]), by_time=total is not None,
-                   noise=eps_ref2 > 0)
+                   budget, _friction_se(s), photon=bool(s["photon_limited"]),
+                   by_time=total is not None, noise=eps_ref2 > 0)
     out = np.array(out, dtype=float)
     out[~(out * 100 <= _SE_CAP)] = np.nan
+    if _friction_se(s) == 0.0:
+        out[:, 1] = np.nan  # gamma known exactly: no curve for it
     return out
+
+
+def _friction_se(settings):
+    """The design's friction prior (< 0: friction fitted), as ``design.relative_se`` takes it."""
+    known = settings.get("friction_error")
+    return -1.0 if known is None else float(known)
 
 
 _GRID_SE: list = []  # the jitted grid evaluation, made on first use (jax imported lazily)
 
 
 def _grid_se():
-    """``f(exposures, intervals, ks, gamma, T, eps_ref^2, W_ref, budget, *, photon, by_time,
-    noise)`` -> (n, 2) relative SEs: one compiled, vmapped program reused by every call."""
+    """``f(exposures, intervals, ks, gamma, T, eps_ref^2, W_ref, budget, friction_se, *,
+    photon, by_time, noise)`` -> (n, 2) relative SEs: one compiled, vmapped program reused by every call."""
     if not _GRID_SE:
         import jax
         import jax.numpy as jnp
 
         from ..design import relative_se
 
-        def grid(exposures, intervals, ks, gamma, temperature, eps_ref2, w_ref, budget, *,
-                 photon, by_time, noise):
+        def grid(exposures, intervals, ks, gamma, temperature, eps_ref2, w_ref, budget,
+                 friction_se, *, photon, by_time, noise):
             def one(w, dt):
                 n = budget / dt if by_time else budget
                 se = relative_se([(dt, w, n)], ks, gamma, temperature, eps_ref2, w_ref, photon,
-                                 noise)
+                                 noise, friction_se)
                 return jnp.max(se[:, :2], axis=0)
 
             return jax.vmap(one)(exposures, intervals)
@@ -60,12 +68,17 @@ def _grid_se():
 
 
 def _target_se(cand, target):
+    """The SE of the design's target for a candidate (worst over the k range): from its
+    predicted SEs for k / gamma / both, else its objective (determinant, force sensitivity;
+    inf where the design does not identify what it must)."""
     se = cand.predicted_se
     if target == "k":
         return float(np.max(se["k"]))
     if target == "gamma":
         return float(np.max(se["gamma"]))
-    return float(np.max(np.sqrt(np.asarray(se["k"]) * np.asarray(se["gamma"]))))
+    if target == "both":
+        return float(np.max(np.sqrt(np.asarray(se["k"]) * np.asarray(se["gamma"]))))
+    return float(cand.objective)
 
 
 def design_se(result, ax=None):

@@ -130,3 +130,87 @@ def test_design_without_tracking_noise_optimises_its_series():
     one = res.candidates[labels.index("optimised single recording")]
     wdt = res.candidates[labels.index("W = dt at the fastest frame rate")]
     assert one.objective <= wdt.objective * (1 + 1e-4)
+
+
+def _brute_information(k, gamma, w, dt, n, eps2, temperature=295.0):
+    """1/2 sum_j g g^T at the Fourier frequencies, g = d log P / d (log k, log gamma,
+    log eps^2) by central differences of the public psd_measured (independent of _fisher)."""
+    f = np.arange(1, n) / (n * dt)
+    th0 = np.log([k, gamma, eps2])
+
+    def logp(th):
+        kk, gg, e2 = np.exp(th)
+        return np.log(np.asarray(bt.psd_measured(f, kk, gg, w, temperature, dt, e2)))
+
+    grads = []
+    for i in range(3):
+        h = np.zeros(3)
+        h[i] = 1e-5
+        grads.append((logp(th0 + h) - logp(th0 - h)) / 2e-5)
+    g = np.stack(grads, axis=1)
+    return 0.5 * g.T @ g
+
+
+def test_known_friction_is_prior_information_on_log_gamma():
+    """friction_se = 0: the covariance of (log k, log eps^2) is the inverse of their own block
+    of the information (gamma held); friction_se = s: the information plus 1/s^2 on log gamma.
+    Reference: the brute-force Whittle information."""
+    from blurtrap.design import relative_se
+
+    n, w, eps2 = 4096, 0.3 * DT, 4e-18
+    brute = _brute_information(K, GAMMA, w, DT, n, eps2)
+    recs = [(DT, w, n)]
+    held = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True, 0.0))[0]
+    block = brute[np.ix_([0, 2], [0, 2])]
+    np.testing.assert_allclose(held[[0, 2]], np.sqrt(np.diag(np.linalg.inv(block))), rtol=3e-3)
+    assert held[1] < 1e-9
+    prior = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True, 0.05))[0]
+    with_prior = brute + np.diag([0.0, 1 / 0.05**2, 0.0])
+    np.testing.assert_allclose(prior, np.sqrt(np.diag(np.linalg.inv(with_prior))), rtol=3e-3)
+    free = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True))[0]
+    np.testing.assert_allclose(free, np.sqrt(np.diag(np.linalg.inv(brute))), rtol=3e-3)
+
+
+def test_determinant_and_force_sensitivity_objectives():
+    """The W = dt candidate's objective: det(cov of log k, log gamma)^(1/4) (D-optimal) and
+    the force sensitivity sqrt(v_kk + v_gg/4 - v_kg + s^2/4) (Rf = k' sqrt(gamma0/gamma') of a
+    volts fit), from the brute-force information."""
+    n, eps2 = 4096, 4e-18
+    cov = np.linalg.inv(_brute_information(K, GAMMA, DT, DT, n, eps2))
+    kw = dict(k=K, gamma=GAMMA, max_fps=1500, n_frames=n, tracking_std=2e-9, series=())
+    det = bt.design(target="determinant", **kw)
+    naive = next(c for c in det.candidates if c.label.startswith("W = dt"))
+    assert naive.objective == pytest.approx(np.linalg.det(cov[:2, :2]) ** 0.25, rel=3e-3)
+    fs = bt.design(target="force_sensitivity", friction_error=0.04, **kw)
+    naive = next(c for c in fs.candidates if c.label.startswith("W = dt"))
+    ref = math.sqrt(cov[0, 0] + cov[1, 1] / 4 - cov[0, 1] + 0.04**2 / 4)
+    assert naive.objective == pytest.approx(ref, rel=3e-3)
+    assert naive.predicted_se["force_sensitivity"][0] == pytest.approx(ref, rel=3e-3)
+    assert "SE force_sensitivity %" in fs.summary()
+    with pytest.raises(ValueError, match="friction_error"):
+        bt.design(target="force_sensitivity", **kw)
+    with pytest.raises(ValueError, match="friction_error"):
+        bt.design(friction_error=-0.1, **kw)
+    with pytest.raises(ValueError, match="known exactly"):
+        bt.design(target="gamma", friction_error=0.0, **kw)
+
+
+def test_known_friction_makes_dt_much_larger_than_tau_designable_and_fittable():
+    """500 fps, k = 0.5 pN/nm (dt/tau ~ 36): without the friction no design identifies both
+    (test above); with it the recommended exposure series identifies k, and calibrate with
+    gamma held fits such a series (before: refused as 'no temporal information' although the
+    exposures separate k from eps^2). k within 3 SE of the truth on one simulated series."""
+    gamma = 6 * math.pi * 0.00095 * 1.53e-6
+    k = 5e-4
+    res = bt.design(k=k, gamma=gamma, max_fps=500, total_time=30.0, tracking_std=2e-9,
+                    friction_error=0.0, series=(2,))
+    assert "series" in res.best.label and math.isfinite(res.best.objective)
+    assert res.predicted_se["k"] < 0.1 and res.predicted_se["gamma"] == 0.0
+    recs = []
+    for i, (dt, w, nf) in enumerate(res.best.recordings):
+        x = bt.simulate(k, gamma, w, dt, int(nf), key=jax.random.key(40 + i),
+                        method="exact_frames", tracking_std=2e-9)
+        recs.append(bt.Recording(np.asarray(x).ravel(), frame_interval=dt, exposure=w))
+    fit = bt.calibrate(recs, fixed={"gamma": gamma})
+    assert abs(fit.k - k) < 3 * fit.k_err
+    assert any("separates k from eps^2" in n for n in fit.notes)

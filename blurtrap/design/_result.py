@@ -1,0 +1,80 @@
+"""The results of :func:`blurtrap.design.design`: a candidate acquisition and the design."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class Acquisition:
+    """One candidate: recordings as (frame_interval [s], exposure [s], n_frames), the predicted
+    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective."""
+
+    label: str
+    recordings: tuple
+    predicted_se: dict  # name -> relative SE (fraction) at each k of the range
+    objective: float
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "objective": self.objective,
+                "recordings": [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
+                               for r in self.recordings],
+                "predicted_relative_se": {n: [float(x) for x in v]
+                                          for n, v in self.predicted_se.items()}}
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignResult:
+    """Result of :func:`design`: the recommended acquisition (``best``), every candidate
+    compared (``candidates``, best first) and the settings used (SI)."""
+
+    best: Acquisition
+    candidates: tuple
+    target: str
+    k: tuple
+    settings: dict
+
+    @property
+    def predicted_se(self) -> dict:
+        """Relative SE of each parameter for the recommended design (worst over the k range)."""
+        return {n: float(np.max(v)) for n, v in self.best.predicted_se.items()}
+
+    def plot(self, ax=None):
+        """Predicted SE against exposure and frame interval, candidates marked
+        (:func:`blurtrap.plotting.design_se`; imports matplotlib). Returns the figure."""
+        from ..plotting import design_se
+
+        return design_se(self, ax=ax)
+
+    def to_dict(self) -> dict:
+        return {"target": self.target, "k_N_per_m": list(self.k), "settings": self.settings,
+                "best": self.best.to_dict(),
+                "candidates": [c.to_dict() for c in self.candidates]}
+
+    def summary(self) -> str:
+        extra = self.target not in ("k", "gamma")
+        lines = [f"experiment design: minimise the SE of {self.target} (worst case over k = "
+                 + ", ".join(f"{k * 1e3:.3g}" for k in self.k) + " pN/nm)",
+                 f"  {'candidate':<34s} {'recordings (dt ms / W ms / frames)':<44s}"
+                 f" {'SE k %':>8s} {'SE gamma %':>11s}"
+                 + (f" {'SE ' + self.target + ' %':>12s}" if extra else "")]
+        for c in self.candidates:
+            recs = "; ".join(f"{r[0] * 1e3:.3g}/{r[1] * 1e3:.3g}/{int(r[2])}"
+                             for r in c.recordings)
+            if len(recs) > 44:
+                recs = recs[:41] + "..."
+            mark = "*" if c is self.best else " "
+            sg = np.max(c.predicted_se["gamma"])
+            lines.append(f"{mark} {c.label:<34s} {recs:<44s} "
+                         f"{100 * np.max(c.predicted_se['k']):8.3g} "
+                         + (f"{100 * sg:11.3g}" if sg > 0 else f"{'known':>11s}")
+                         + (f" {100 * c.objective:12.3g}" if extra else ""))
+        known = self.settings.get("friction_error")
+        lines.append("(* recommended; SEs from the Whittle Fisher information, relative, "
+                     "worst over the k range"
+                     + ("" if known is None else
+                        f"; friction known to {100 * known:.3g} % (SE gamma is that prior)")
+                     + ")")
+        return "\n".join(lines)
