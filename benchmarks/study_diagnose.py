@@ -15,8 +15,11 @@ exactly as in tests/diagnostics/test_hidden_effects.py.
 Per scenario and seed it records: adequate, the first-ranked candidate (and whether it is
 significant), the p-value of the base gof, and -- for hidden-effect scenarios -- whether the
 full refit with the first-ranked effect (``d.ranking[0].fit``) passes gof (p > threshold)
-and has k, gamma within 3 SE of the truth. Results go to ``diagnose_study.json`` (per-seed
-rows) and a markdown summary on stdout.
+and has k, gamma within 3 SE and within 2 SE of the truth. Effects outside the Gaussian
+likelihood are refitted with their remedies (``_diag19_refits``: calibrate_anharmonic, the
+exact likelihood at the frame times for timing_jitter, per-power gamma and T for heating),
+and ``naive_camera`` starts from the naive model (the coupled group must rank first).
+Results go to ``diagnose_study.json`` (per-seed rows) and a markdown summary on stdout.
 
 Seeds: control seeds are 1000 + i, effect scenarios 2000 + 100 * scenario_index + i (the
 multi-power scenarios simulate their 4 recordings with keys 10 * seed + 0..3). Every row
