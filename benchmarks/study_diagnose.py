@@ -223,12 +223,16 @@ SCENARIOS = {
     # issue 19: a naive start on one camera recording (the coupled group must rank first)
     "naive_camera": ("motion_blur+aliasing", lambda s: rf.naive_camera(s), "naive", "naive",
                      "W = dt, k = 0.05 pN/nm, 1.5 um bead, eps = 2 nm, model naive"),
+    "naive_camera_long": ("motion_blur+aliasing", lambda s: rf.naive_camera(s, n=2**16),
+                          "naive", "naive", "as naive_camera, 65 536 frames"),
+    "naive_camera_noiseless": ("motion_blur+aliasing", lambda s: rf.naive_camera(s, eps=0.0),
+                               "naive", "naive", "as naive_camera, eps = 0 (blur model exact)"),
 }
 SEED_BASE = {name: (1000 if name == "control" else 2000 + 100 * i)
              for i, name in enumerate(SCENARIOS)}
 TRUTH_KG = {name: (K_PD, GAMMA_PD) for name in SCENARIOS
             if name.startswith(("control_photodiode", "detector_filter", "hydrodynamics"))}
-TRUTH_KG["naive_camera"] = (rf.K_CAM, rf.GAMMA_CAM)
+TRUTH_KG.update({n: (rf.K_CAM, rf.GAMMA_CAM) for n in SCENARIOS if n.startswith("naive")})
 TRUTH_KG.update({"hydrodynamics_1um": (K_PD, gamma_stokes(1.0e-6)),
                  "hydrodynamics_0.5um": (K_PD, gamma_stokes(0.5e-6)),
                  "hydrodynamics_0.25um": (K_PD, gamma_stokes(0.25e-6)),
