@@ -15,8 +15,11 @@ exactly as in tests/diagnostics/test_hidden_effects.py.
 Per scenario and seed it records: adequate, the first-ranked candidate (and whether it is
 significant), the p-value of the base gof, and -- for hidden-effect scenarios -- whether the
 full refit with the first-ranked effect (``d.ranking[0].fit``) passes gof (p > threshold)
-and has k, gamma within 3 SE of the truth. Results go to ``diagnose_study.json`` (per-seed
-rows) and a markdown summary on stdout.
+and has k, gamma within 3 SE and within 2 SE of the truth. Effects outside the Gaussian
+likelihood are refitted with their remedies (``_diag19_refits``: calibrate_anharmonic, the
+exact likelihood at the frame times for timing_jitter, per-power gamma and T for heating),
+and ``naive_camera`` starts from the naive model (the coupled group must rank first).
+Results go to ``diagnose_study.json`` (per-seed rows) and a markdown summary on stdout.
 
 Seeds: control seeds are 1000 + i, effect scenarios 2000 + 100 * scenario_index + i (the
 multi-power scenarios simulate their 4 recordings with keys 10 * seed + 0..3). Every row
@@ -35,6 +38,7 @@ import platform
 import sys
 import time
 
+import _diag19_refits as rf
 import jax
 import numpy as np
 from _machine import cpu_model
@@ -216,11 +220,19 @@ SCENARIOS = {
                       "jitter std 5 % of dt, W = 0.8 dt, time stamps kept"),
     "timing_jitter_weak": ("timing_jitter", lambda s: jittered(s, 2e-4), None, "timestamps",
                            "jitter std 0.02 % of dt (tolerance: max deviation 0.1 % of dt)"),
+    # issue 19: a naive start on one camera recording (the coupled group must rank first)
+    "naive_camera": ("motion_blur+aliasing", lambda s: rf.naive_camera(s), "naive", "naive",
+                     "W = dt, k = 0.05 pN/nm, 1.5 um bead, eps = 2 nm, model naive"),
+    "naive_camera_long": ("motion_blur+aliasing", lambda s: rf.naive_camera(s, n=2**16),
+                          "naive", "naive", "as naive_camera, 65 536 frames"),
+    "naive_camera_noiseless": ("motion_blur+aliasing", lambda s: rf.naive_camera(s, eps=0.0),
+                               "naive", "naive", "as naive_camera, eps = 0 (blur model exact)"),
 }
 SEED_BASE = {name: (1000 if name == "control" else 2000 + 100 * i)
              for i, name in enumerate(SCENARIOS)}
 TRUTH_KG = {name: (K_PD, GAMMA_PD) for name in SCENARIOS
             if name.startswith(("control_photodiode", "detector_filter", "hydrodynamics"))}
+TRUTH_KG.update({n: (rf.K_CAM, rf.GAMMA_CAM) for n in SCENARIOS if n.startswith("naive")})
 TRUTH_KG.update({"hydrodynamics_1um": (K_PD, gamma_stokes(1.0e-6)),
                  "hydrodynamics_0.5um": (K_PD, gamma_stokes(0.5e-6)),
                  "hydrodynamics_0.25um": (K_PD, gamma_stokes(0.25e-6)),
@@ -231,7 +243,9 @@ TRUTH = {"power_offset": 0.05, "power_offset_weak": 0.01, "laser_heating": 25.0,
 
 
 def fixed_ok(name, kind, fit):
-    """(gof, truth) checks of the full refit with the first-ranked effect."""
+    """Truth check (3 SE) of the full refit with the first-ranked effect, as before issue 19
+    (no remedy: anharmonicity and timing_jitter pass when identified); kept for
+    ``_redesign_worker.py``. The study itself uses :func:`refit_check`."""
     if kind in ("histogram", "timestamps"):  # not part of the likelihood: nothing to refit
         return True
     if fit is None:
@@ -253,6 +267,37 @@ def fixed_ok(name, kind, fit):
     return None
 
 
+def refit_check(name, kind, data, d, fit):
+    """The refit of the identified effect against the truth: ``(remedy, ok at 3 SE, ok at
+    2 SE)``. Effects outside the Gaussian likelihood get their remedy (issue 19):
+    anharmonicity ``calibrate_anharmonic``, timing_jitter the exact likelihood at the frame
+    times, laser_heating per-power gamma and T; ``naive`` the coupled group's refit."""
+    k, g = TRUTH_KG.get(name, (K, GAMMA))
+    if kind == "histogram":
+        rem = rf.anharmonic_remedy(data, k, g, d.threshold)
+    elif kind == "timestamps":
+        rem = rf.jitter_remedy(data, k, g, d.threshold)
+    elif kind == "naive":
+        rem = rf.naive_remedy(data, d, d.threshold)
+    elif fit is None:
+        return None, None, None
+    elif kind == "single":
+        rem = rf.fit_pulls(fit, k, g)
+    elif kind == "heating":
+        if "heating" not in fit.param_names:
+            return {"error": "no heating parameter"}, False, False
+        rem = rf.heating_remedy(fit, data, TRUTH[name], 3e-5, GAMMA, d.threshold)
+    elif kind == "power_offset":
+        if "power_offset" not in fit.param_names:
+            return {"error": "no power_offset parameter"}, False, False
+        i = fit.param_names.index("power_offset")
+        rem = {"k_pull": float((fit.values[i] - TRUTH[name]) / fit.errors[i]),  # P0 pull
+               "gamma_pull": float((fit.gamma - GAMMA) / fit.gamma_err)}
+    else:
+        return None, None, None
+    return rem, rf.truth_ok(rem, 3.0), rf.truth_ok(rem, 2.0)
+
+
 def run_one(name, seed):
     effect, build, model, kind, _ = SCENARIOS[name]
     data = build(seed)
@@ -270,17 +315,26 @@ def run_one(name, seed):
         "significant": [c.effect for c in d.ranking if c.significant],
         "base_within": (within(d.fit, k=TRUTH_KG.get(name, (K, GAMMA))[0],
                                gamma=TRUTH_KG.get(name, (K, GAMMA))[1])
-                        if kind in ("single", "histogram", "timestamps") else None),
+                        if kind in ("single", "histogram", "timestamps", "naive") else None),
         "implausible": [c.effect for c in d.ranking if not getattr(c, "plausible", True)],
         "notes": list(d.notes),
     }
     if effect is not None:
         row["identified"] = bool(top is not None and top.effect == effect and top.significant)
-        row["fixed_gof_p"] = None if fit is None else float(fit.gof["p_value"])
-        row["fixed_gof_ok"] = (True if kind in ("histogram", "timestamps") else
-                               None if fit is None else bool(fit.gof["p_value"] > d.threshold))
-        row["fixed_truth_ok"] = fixed_ok(name, kind, fit) if row["identified"] else None
-        row["fixed_ok"] = bool(row["identified"] and row["fixed_gof_ok"] and row["fixed_truth_ok"])
+        t1 = time.perf_counter()
+        rem, ok3, ok2 = (refit_check(name, kind, data, d, fit) if row["identified"]
+                         else (None, None, None))
+        row["remedy_s"] = time.perf_counter() - t1
+        if rem is not None and "gof_p" in rem:  # the remedy's own fit
+            row["fixed_gof_p"], row["fixed_gof_ok"] = rem["gof_p"], rem["gof_ok"]
+        else:
+            row["fixed_gof_p"] = None if fit is None else float(fit.gof["p_value"])
+            row["fixed_gof_ok"] = (None if fit is None
+                                   else bool(fit.gof["p_value"] > d.threshold))
+        row["remedy"] = rem
+        row["fixed_truth_ok"], row["fixed_truth_ok2"] = ok3, ok2
+        row["fixed_ok"] = bool(row["identified"] and row["fixed_gof_ok"] and ok3)
+        row["fixed_ok2"] = bool(row["identified"] and row["fixed_gof_ok"] and ok2)
     return row, d
 
 
@@ -492,8 +546,8 @@ def summarize(rows):
     lines.append("## Identification (hidden effect)\n")
     lines.append("| scenario | size | n | (1) inadequate | (2) hidden effect ranked first "
                  "(significant) | (3) refit gof ok & truth within 3 SE | all of (1)-(3) | "
-                 "top when wrong |")
-    lines.append("|---|---|---|---|---|---|---|---|")
+                 "(3') refit gof ok & truth within 2 SE | all of (1)-(3') | top when wrong |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|")
     for name, (effect, _, _, _, label) in SCENARIOS.items():
         rs = [r for r in rows if r["scenario"] == name]
         if effect is None or not rs:
@@ -503,6 +557,9 @@ def summarize(rows):
         fixed_rows = [r for r in rs if r["identified"]]
         fx = frac([{"x": r["fixed_gof_ok"] and r["fixed_truth_ok"]} for r in fixed_rows], "x")
         allok = frac(rs, "fixed_ok")
+        fx2 = frac([{"x": r["fixed_gof_ok"] and r.get("fixed_truth_ok2")} for r in fixed_rows],
+                   "x")
+        allok2 = frac(rs, "fixed_ok2")
         wrong = {}
         for r in rs:
             if not r["identified"]:
@@ -510,8 +567,10 @@ def summarize(rows):
                 wrong[key] = wrong.get(key, 0) + 1
         wtxt = ", ".join(f"{k}: {v}" for k, v in wrong.items()) or "-"
         lines.append(f"| {name} | {label} | {len(rs)} | {fmt(*inad)} | {fmt(*ident)} | "
-                     f"{fmt(*fx)} (of identified) | {fmt(*allok)} | {wtxt} |")
+                     f"{fmt(*fx)} (of identified) | {fmt(*allok)} | {fmt(*fx2)} | "
+                     f"{fmt(*allok2)} | {wtxt} |")
     lines.append("")
+    lines += rf.remedy_lines(rows)
     if errs:
         lines.append("## diagnose() raised (not counted above)\n")
         lines.extend(f"- {r['scenario']} seed {r['seed']}: {r['error']}" for r in errs)
@@ -609,7 +668,7 @@ def main(argv=None):
             n = per[name]
         elif name == "control":
             n = args.seeds
-        elif SCENARIOS[name][3] not in ("single", "histogram", "timestamps"):
+        elif SCENARIOS[name][3] not in ("single", "histogram", "timestamps", "naive"):
             n = power if not name.endswith("_weak") else min(power, weak)
         else:
             n = weak if name.endswith("_weak") else args.effect_seeds
