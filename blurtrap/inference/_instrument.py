@@ -22,7 +22,7 @@ a photodiode filter multiplies by ``|T(f_d)|``. The measured ratio of the respon
 recorded stage amplitude is ``|r| = sinc(f_d W) |H(f_d)| |T(f_d)| / Rd``, so ``Rd`` follows
 from ``r`` and the passive fit's ``f_c`` alone (no Stokes), and then ``gamma = gamma_V / Rd^2``
 and ``k = k_V / Rd^2``. With the known bead's hydrodynamics in the model ``H`` is that of
-Tolic-Norrelykke et al. (2006) eq. D3 (``_active.fluid_response``, ``_hydro_drive.drive_shape``).
+Tolic-Norrelykke et al. (2006) eq. D3 (:mod:`._drive_fit`).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from ._drive_fit import drive_check, drive_shape_of, rd_from_drive
 from ._models import TrapModel
 from ._options import frequency_ranges
 
@@ -287,30 +288,11 @@ def _power_of(name):
     return _SCALING.get(base, 0)
 
 
-def _rd_from_drive(values, names, drive, model, shape=(1.0, None)):
-    """Rd from the drive response (module docstring); ``values`` in volts units; ``shape``:
-    the bead's ``(G, f_m)`` at f_d with hydrodynamic friction (``_hydro_drive.drive_shape``)."""
-    from ._active import fluid_response
-
-    mag, _, f_d, w = drive[:4]
-    ks = [v for n, v in zip(names, values) if n == "k" or n.startswith("k[")]
-    fc = ks[0] / (2.0 * math.pi * values[names.index("gamma")])
-    h = abs(fluid_response(f_d, fc, *shape)[0])
-    blur = abs(float(np.sinc(f_d * w))) if model.blur else 1.0
-    t = 1.0
-    if "f3db" in names:
-        from ..physics import photodiode_transfer
-
-        t = math.sqrt(float(photodiode_transfer(f_d, values[names.index("f3db")],
-                                                values[names.index("diode_alpha")])))
-    return blur * h * t / mag
-
-
 def _outputs(theta, names, plan, n_fit, shape):
     """The reported vector from the fit vector (volts units) and the inputs after it."""
     values = theta[:n_fit]
     if plan.drive is not None:
-        rd = _rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape)
+        rd = rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape)
     else:
         assert plan.gamma_known is not None
         rd = math.sqrt(values[names.index("gamma")] / theta[n_fit])
@@ -319,18 +301,9 @@ def _outputs(theta, names, plan, n_fit, shape):
     return np.array(out + [rd, k0 * rd])
 
 
-def _drive_shape(plan, gamma=None):
-    from ._hydro_drive import drive_shape
-
-    if plan.drive is None:
-        return 1.0, None
-    rec = plan.recordings[plan.drive[4]]
-    return drive_shape(plan.model, plan.fixed, rec.temperature, plan.drive[2], gamma)
-
-
 def _volts_result(res, plan):
     names = list(res.param_names)
-    shape = _drive_shape(plan)
+    shape = drive_shape_of(plan)
     n_fit = len(names)
     if plan.drive is not None:
         inp, inp_var = plan.drive[0], plan.drive[1] ** 2
@@ -394,27 +367,5 @@ def finish_instrument(res, plan: Plan):
     if plan.volts:
         return _volts_result(res, plan)
     if plan.drive is not None and "gamma" in res.param_names:
-        names = list(res.param_names)
-        values = np.asarray(res.values, float)
-        shape = _drive_shape(plan, values[names.index("gamma")])
-        rd = _rd_from_drive(values, names, plan.drive, plan.model, shape)
-        # the error of f_c (k and gamma of the fit) and of the drive's ratio
-        idx = [next(i for i, n in enumerate(names) if n == "k" or n.startswith("k[")),
-               names.index("gamma")]
-        grad = np.zeros(len(idx))
-        for j, i in enumerate(idx):
-            up, dn = values.copy(), values.copy()
-            up[i], dn[i] = values[i] * (1 + 1e-6), values[i] * (1 - 1e-6)
-            grad[j] = (_rd_from_drive(up, names, plan.drive, plan.model, shape)
-                       - _rd_from_drive(dn, names, plan.drive, plan.model, shape)) / (
-                           2e-6 * values[i])
-        c = np.asarray(res.covariance, float)[np.ix_(idx, idx)]
-        var_fit = float(grad @ np.where(np.isfinite(c), c, 0.0) @ grad)
-        se = math.hypot(rd * plan.drive[1] / plan.drive[0], math.sqrt(max(var_fit, 0.0)))
-        z = (rd - 1.0) / se
-        return dataclasses.replace(res, notes=res.notes + (
-            f"drive: the stage drive gives a position scale of {rd:.5g} +- {se:.2g} m per m of "
-            f"the trace ({z:+.1f} SE from 1" + ("): the position calibration and the drive "
-                                                "disagree; check the units and the stage "
-                                                "amplitude" if abs(z) > 3 else ")"),))
+        return drive_check(res, plan)
     return res
