@@ -10,6 +10,12 @@
   inverse FFT, the real part times sqrt(2), the first ``N`` samples. What an anti-aliased
   photodiode records: the true position's spectrum below Nyquist, unfolded, no exposure
   average, plus white tracking noise.
+- :func:`drive_response_d3` is the response of the bead to a fluid (stage) drive,
+  Tolic-Norrelykke et al. (2006) eq. (D3) with the bulk friction of eq. (D4), as a complex
+  transfer (the amplitude of eq. D3 and the phase of the equation of motion it comes from,
+  ``m x'' = -k x - gamma(f) (x' - x_s')``), and :func:`generate_hydro_driven` adds that
+  response to a trace of :func:`generate_hydro`: the drive's peak in the recording has the
+  amplitude and the phase of eq. (D3). The stage is recorded at the frame times.
 """
 
 from __future__ import annotations
@@ -78,3 +84,35 @@ def generate_hydro(n, fs, k, radius, seed, *, temperature=295.0, eta=None, rho_f
     z = (rng.standard_normal(m) + 1j * rng.standard_normal(m)) / math.sqrt(2.0)
     x = math.sqrt(2.0) * np.fft.ifft(np.sqrt(m * fs * p) * z).real[:n]
     return x + tracking_std * rng.standard_normal(n)
+
+
+def drive_response_d3(f, k, radius, eta, rho_f, rho_b):
+    """Complex ``x/x_s`` at f [Hz] for a stage moving as ``Re[S e^{+2 pi i f t}]``, bulk.
+
+    In the ``e^{-i w t}`` convention of the paper, ``g = gamma(f)/gamma_0 = 1 + (1 - i)
+    sqrt(f/f_nu) - (2i/9) f/f_nu`` (eq. D4) and ``f_m = gamma_0/(2 pi m_bead)``:
+    ``x/x_s = -i f g/(f_c - f^2/f_m - i f g)``, whose modulus squared is eq. (D3)'s
+    ``f^2 |g|^2/((f_c + f Im g - f^2/f_m)^2 + (f Re g)^2)``; ``e^{+2 pi i f t}`` takes the
+    complex conjugate."""
+    gamma0, f_nu, _ = _bead(radius, eta, rho_f, rho_b)
+    f_m = gamma0 / (2.0 * math.pi * 4.0 / 3.0 * math.pi * radius**3 * rho_b)
+    fc = k / (2.0 * math.pi * gamma0)
+    s = math.sqrt(f / f_nu)
+    g = 1.0 + (1.0 - 1j) * s - 2j / 9.0 * s * s
+    return np.conj(-1j * f * g / (fc - f * f / f_m - 1j * f * g))
+
+
+def generate_hydro_driven(n, fs, k, radius, seed, *, amplitude, frequency, phase=0.3,
+                          temperature=295.0, eta=None, rho_f=997.803, rho_b=1050.0,
+                          tracking_std=0.0, stage_noise=0.0):
+    """``(positions, stage)`` [m]: :func:`generate_hydro` plus the response to a stage drive
+    ``amplitude cos(2 pi frequency t_n + phase)`` (:func:`drive_response_d3`), ``t_n = n/fs``
+    (an anti-aliased detector samples the position at the frame times); the stage as
+    recorded, with white noise of std ``stage_noise`` [m]."""
+    eta = 0.957812e-3 if eta is None else eta
+    x = generate_hydro(n, fs, k, radius, seed, temperature=temperature, eta=eta, rho_f=rho_f,
+                       rho_b=rho_b, tracking_std=tracking_std)
+    h = drive_response_d3(frequency, k, radius, eta, rho_f, rho_b)
+    drive = amplitude * np.exp(1j * (2.0 * math.pi * frequency * np.arange(n) / fs + phase))
+    stage = drive.real + stage_noise * np.random.default_rng([seed, 1]).standard_normal(n)
+    return x + (h * drive).real, stage

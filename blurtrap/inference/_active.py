@@ -15,7 +15,21 @@ reports ``x / Rd``. Fitting cos and sin at ``f_d`` to the recorded stage (``S`` 
 
     ``X / S = sinc(f_d W) e^{-i pi f_d W} H(f_d) T(f_d) / Rd``,
 
-hence ``Rd = sinc(f_d W) |H(f_d)| |T(f_d)| / |X/S|``. The phase of ``X/S`` must equal
+hence ``Rd = sinc(f_d W) |H(f_d)| |T(f_d)| / |X/S|``.
+
+**Hydrodynamic friction** (Tolic-Norrelykke et al. 2006, appendix D, eq. D3). A bead whose
+friction depends on frequency, ``G(f) = gamma(f)/gamma`` relative to its zero-frequency
+friction ``gamma`` (complex, in the sign convention of eqs. D4/D6 and of
+``blurtrap.physics.complex_friction``, whose ``e^{-2 pi i f t}`` convention makes
+``Im G < 0``; the fluid's added mass included), and with the bead's own inertia,
+``f_m = gamma/(2 pi m_bead)``, responds with
+
+    ``H(f) = i f G*/(f_c - f^2/f_m + i f G*)``,  ``|H| = f |G| / sqrt(a^2 + b^2)``,
+    ``a = f_c + f Im G - f^2/f_m``,  ``b = f Re G``
+
+(``G*`` the complex conjugate: this module's ``e^{+2 pi i f t}`` convention); ``G = 1``,
+``f_m = inf`` give the Lorentzian ``H`` above. Then ``d ln|H|/d f_c = -a/(a^2 + b^2)`` and
+``arg H = pi/2 - arg G - atan2(b, a)`` with ``d arg H/d f_c = b/(a^2 + b^2)``. The phase of ``X/S`` must equal
 ``arg H - pi f_d W + arg T = pi/2 - atan(f_d/f_c) - pi f_d W + arg T``; a mismatch means the
 model is wrong: e.g. a trace that records the bead relative to the stage, ``(H - 1) x_s``
 (off by +pi/2 at every f_d, since ``(H - 1)/H = i f_c/f_d``), an inverted detector (off by
@@ -23,7 +37,7 @@ pi) or a stage sampled elsewhere than at the end of the exposure.
 
 **References:** Tolic-Norrelykke, Schaffer, Howard, Pavone, Julicher & Flyvbjerg (2006), Rev.
 Sci. Instrum. 77, 103101 (eqs. 4-7: the response to a fluid drive; section IV: Rd from the
-drive's spike).
+drive's spike; appendix D, eqs. D3, D4 and D6: the same with hydrodynamic friction).
 """
 
 from __future__ import annotations
@@ -43,7 +57,8 @@ from ._sinusoids import (
     refine_frequency,
 )
 
-__all__ = ["DriveResponse", "DisplacementSensitivity", "drive_response", "displacement_sensitivity"]
+__all__ = ["DriveResponse", "DisplacementSensitivity", "drive_response", "displacement_sensitivity",
+           "fluid_response"]
 
 _GUARD_BINS = 2  # bins either side of the drive left out of the local noise estimate
 _MIN_NOISE_BINS, _MAX_NOISE_BINS = 60, 4000
@@ -199,26 +214,53 @@ def _transfer_value(detector_transfer, freq: float) -> complex:
     return t
 
 
+def fluid_response(drive_frequency, corner_frequency, friction=1.0, dissipation_frequency=None):
+    """The bead's response ``H(f_d)`` to a fluid (stage) drive and the two slopes the errors need.
+
+    ``H = i f G*/(f_c - f^2/f_m + i f G*)`` (module docstring; TN 2006 eq. D3 in this module's
+    sign convention). `friction` is ``G(f_d) = gamma(f_d)/gamma`` in the sign convention of
+    ``blurtrap.physics.complex_friction`` (1: frequency-independent); `dissipation_frequency`
+    ``f_m = gamma/(2 pi m_bead)`` [Hz] (None: no inertia).
+
+    **Returns:** ``(H, dln|H|/df_c, darg H/df_c)``, the slopes ``-a/(a^2 + b^2)`` and
+    ``b/(a^2 + b^2)`` [1/Hz] with ``a = f_c + f Im G - f^2/f_m``, ``b = f Re G``.
+    """
+    fd, fc, g = float(drive_frequency), float(corner_frequency), complex(friction)
+    inertia = 0.0 if dissipation_frequency is None else fd * fd / float(dissipation_frequency)
+    a = fc + fd * g.imag - inertia
+    b = fd * g.real
+    h = 1j * fd * g.conjugate() / complex(a, b)
+    d2 = a * a + b * b
+    return h, -a / d2, b / d2
+
+
 def displacement_sensitivity(ratio, ratio_se, corner_frequency, corner_frequency_se, drive_frequency,
-                             exposure, detector_transfer=None) -> DisplacementSensitivity:
+                             exposure, detector_transfer=None, *, friction=1.0,
+                             dissipation_frequency=None) -> DisplacementSensitivity:
     """Displacement sensitivity ``Rd`` [m per detector unit] from the drive response ``X/S``.
 
-    ``Rd = sinc(f_d W) |H(f_d)| |T(f_d)| / |X/S|`` with ``|H| = f_d / sqrt(f_c^2 + f_d^2)``
-    (module docstring). Delta method, the ratio and f_c independent:
-    ``(se/Rd)^2 = (ratio_se/|X/S|)^2 + (f_c/(f_c^2 + f_d^2))^2 corner_frequency_se^2``.
-    Phase check: ``mismatch = arg(X/S) - [pi/2 - atan(f_d/f_c) - pi f_d W + arg T]`` wrapped
-    to (-pi, pi], ``se^2 = (ratio_se/|X/S|)^2 + (f_d/(f_c^2 + f_d^2))^2 corner_frequency_se^2``.
+    ``Rd = sinc(f_d W) |H(f_d)| |T(f_d)| / |X/S|`` with :func:`fluid_response`'s ``H``
+    (``|H| = f_d / sqrt(f_c^2 + f_d^2)`` without hydrodynamics; module docstring). Delta
+    method, the ratio and f_c independent:
+    ``(se/Rd)^2 = (ratio_se/|X/S|)^2 + (dln|H|/df_c)^2 corner_frequency_se^2``.
+    Phase check: ``mismatch = arg(X/S) - [arg H - pi f_d W + arg T]`` wrapped to (-pi, pi],
+    ``se^2 = (ratio_se/|X/S|)^2 + (darg H/df_c)^2 corner_frequency_se^2``.
 
     **Arguments:** `ratio` (complex ``X/S`` [unit/m]) and `ratio_se` (SE of each quadrature, as
     :class:`DriveResponse`); `corner_frequency` f_c [Hz] (from a passive fit; it carries no length
     unit) and its SE; `drive_frequency` f_d [Hz]; `exposure` W [s]; `detector_transfer`: None, the
-    complex ``T(f_d)``, or a callable ``f -> T(f)`` (e.g. a photodiode's low-pass).
+    complex ``T(f_d)``, or a callable ``f -> T(f)`` (e.g. a photodiode's low-pass);
+    `friction`: the complex ``G(f_d) = gamma(f_d)/gamma`` (TN 2006 eqs. D4/D6, the sign
+    convention of ``blurtrap.physics.complex_friction``; default 1) and
+    `dissipation_frequency` ``f_m = gamma/(2 pi m_bead)`` [Hz] (default None: no inertia), for
+    a bead with hydrodynamic friction (``blurtrap.inference._hydro_drive.drive_friction``).
 
     **Returns:** a :class:`DisplacementSensitivity`. With ``Rd``, the passive fit's diffusion in
     detector units gives ``D = Rd^2 D_unit``, ``gamma = kT/D`` and ``k = 2 pi gamma f_c``.
 
     **Raises:** ``ValueError`` for a zero or non-finite ratio, negative SEs, non-positive
-    frequencies, a negative exposure or a zero transfer.
+    frequencies, a negative exposure, a zero transfer, a non-finite friction with
+    ``Re G <= 0``, or a non-positive dissipation frequency.
     """
     try:
         r = complex(np.asarray(ratio).item())
@@ -232,15 +274,28 @@ def displacement_sensitivity(ratio, ratio_se, corner_frequency, corner_frequency
     fd = check_positive(drive_frequency, "drive_frequency", "Hz")
     w = _non_negative(exposure, "exposure", "s")
     t = _transfer_value(detector_transfer, fd)
-    h = 1j * fd / (fc + 1j * fd)
+    g = _friction_value(friction)
+    fm = None if dissipation_frequency is None else check_positive(
+        dissipation_frequency, "dissipation_frequency", "Hz")
+    h, dlog_fc, darg_fc = fluid_response(fd, fc, g, fm)
     transfer = np.sinc(fd * w) * np.exp(-1j * np.pi * fd * w) * h * t
     rd = abs(transfer) / abs(r)
     rel_r = r_se / abs(r)
-    d2 = fc * fc + fd * fd
-    se = rd * np.hypot(rel_r, fc / d2 * fc_se)
+    se = rd * np.hypot(rel_r, dlog_fc * fc_se)
     mismatch = float(np.angle(r / transfer))
-    return DisplacementSensitivity(float(rd), float(se), mismatch, float(np.hypot(rel_r, fd / d2 * fc_se)),
-                                   complex(transfer))
+    return DisplacementSensitivity(float(rd), float(se), mismatch,
+                                   float(np.hypot(rel_r, darg_fc * fc_se)), complex(transfer))
+
+
+def _friction_value(friction) -> complex:
+    try:
+        g = complex(np.asarray(friction).item())
+    except (TypeError, ValueError):
+        g = complex(np.nan)
+    if not (np.isfinite(g.real) and np.isfinite(g.imag) and g.real > 0):
+        raise ValueError("friction must be the complex friction ratio gamma(f_d)/gamma, finite "
+                         f"with a positive real part (dimensionless); got friction = {friction!r}.")
+    return g
 
 
 def _non_negative(value, name: str, unit: str) -> float:

@@ -105,8 +105,10 @@ def calibrate(
       parameter; distance, densities and viscosity from the settings, water at T where not
       given), ``False`` leaves it out, ``"auto"`` adds it when the bead radius is known and
       ignoring it would bias k or gamma by more than 1/3 of their standard error (predicted
-      from the model spectra); default: the recordings' ``hydrodynamics`` setting, else
-      ``"auto"``. The notes say what was used.
+      from the model spectra; with a stage drive in volts: Rd, gamma or k); default: the
+      recordings' ``hydrodynamics`` setting, else ``"auto"``. With a stage drive the drive
+      response uses the same friction and the bead's inertia (Tolic-Norrelykke et al. 2006,
+      eq. D3). The notes say what was used.
 
     Positions in volts (``position_unit="V"``) give the displacement sensitivity Rd [m/V] and
     force sensitivity Rf = k Rd [N/V] as parameters ``displacement_sensitivity`` and

@@ -31,6 +31,24 @@ f_c = 835 Hz, R = 0.54 um: predicted +2 %, while the fit with the correction mov
 :data:`AUTO_THRESHOLD` = 1/3 (over several recordings, the root sum of squares: the pooled
 ratio when they share k). At 1/3 SE a 95 % interval still covers ~94 %.
 
+**Active calibration** (a stage drive, Tolic-Norrelykke et al. 2006 eq. D3). With the
+correction on, the drive response uses the same friction: ``_hydro_drive.drive_friction`` gives
+``G(f_d) = gamma(f_d)/gamma`` and the bead's dissipation frequency ``f_m`` for
+``blurtrap.inference._active.fluid_response``; in volts the effect carries the bead's
+Stokes x Faxen friction for the inertia terms (the fitted gamma is in volts units). "auto"
+for positions in volts with a drive (Rd, gamma and k all come through the drive response)
+predicts, at the moment estimate, the biases of ``ln Rd = ln|H(f_c)| - ln|r| + const``,
+``ln gamma = ln gamma_V - 2 ln Rd``, ``ln k = ln k_V - 2 ln Rd`` and ``ln Rf``: the passive
+fit's linearised bias in ``ln f_c`` times ``d ln|H|/d ln f_c`` plus
+``ln|H_Lorentz(f_c)| - ln|H_hydro(f_c)|`` at f_d, with SEs from the Whittle covariance and the
+ratio's; on above the same :data:`AUTO_THRESHOLD`. In metres the drive only checks the
+position scale, and the passive rule above decides. R = 2 um, 78.125 kHz anti-aliased, 2^17
+samples, f_c ~ 600 Hz, 200 nm drive (the setting of tests/inference/test_active_hydro.py):
+predicted Rd +24 % (32 Hz) and +11 % (300 Hz), measured +29/+31 % and +15/+18 % on two seeds
+each; R = 1.5 um, f_c = 588 Hz: predicted +17 % and +7.9 % (6.4 and 4.9 SE), measured over 50
+seeds +22 to +40 % and +11 to +22 % (benchmarks/RESULTS_instruments.md, 6b): the
+linearisation understates the size, not the decision.
+
 Numbers (R = 1.5 um polystyrene in water at 295 K, k = 0.1 pN/nm, f_c ~ 590 Hz; predicted /
 measured over 50 seeds in benchmarks/RESULTS_instruments.md):
 
@@ -132,12 +150,14 @@ def _ordinates(rec, band, excluded):
 
 
 def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
-                   gamma_guess=None):
+                   gamma_guess=None, with_cov=False):
     """``(bias, se)`` of (log k, log gamma) of a fit of ``rec`` that ignores ``effect``
     (module docstring) at ``gamma_guess`` (the bead's friction, positions in metres) and the
     blur-corrected variance's k, else at the moment estimate; the gamma entries are NaN when
     ``gamma_fixed`` holds it. ``(0, inf)`` when the corner frequency at that point is not
-    inside the fitted band (dt >~ tau: the spectrum's shape is not fitted)."""
+    inside the fitted band (dt >~ tau: the spectrum's shape is not fitted). ``with_cov``:
+    also the point ``(k0, gamma0)`` and the Whittle covariance of (log k, log gamma) (NaN rows
+    for a held gamma), ``(bias, se, point, cov)``."""
     import jax
     import jax.numpy as jnp
 
@@ -157,13 +177,13 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
                                                float(rec.exposure), float(rec.temperature)))
         g0 = gamma_guess
     elif not 0.02 < rho < 0.99999:
-        return np.zeros(2), np.full(2, np.inf)
+        return _untrusted(with_cov, k0, g0)
     f, w = _ordinates(rec, band, excluded)
     if f.size < 3 or not k0 / (2.0 * math.pi * g0) < f[-1]:
         # the corner is not inside the fitted band: k comes from the spectrum's level, and
         # the linearisation is not trusted there (an e2e camera case, f_c = 3.3 f_Nyquist:
         # predicted +2 %, a fit with the correction moved k by -4 %)
-        return np.zeros(2), np.full(2, np.inf)
+        return _untrusted(with_cov, k0, g0)
     core = TrapModel(blur=model.blur, alias=model.alias, noise=model.noise, name="rule")
     args = (jnp.asarray([float(rec.frame_interval)]), jnp.asarray([float(rec.exposure)]),
             jnp.asarray([float(rec.temperature)]))
@@ -183,10 +203,19 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
     cov = np.linalg.pinv(fisher)
     step = -cov @ (jac.T @ (w * (1.0 - p1 / p0)))
     bias, se = np.full(2, np.nan), np.full(2, np.nan)
+    cov2 = np.full((2, 2), np.nan)
     for j, idx in enumerate(free):
         if idx < 2:
             bias[idx], se[idx] = step[j], math.sqrt(max(cov[j, j], 0.0))
-    return bias, se
+            for i, jdx in enumerate(free):
+                if jdx < 2:
+                    cov2[idx, jdx] = cov[j, i]
+    return (bias, se, (k0, g0), cov2) if with_cov else (bias, se)
+
+
+def _untrusted(with_cov, k0, g0):
+    out = (np.zeros(2), np.full(2, np.inf))
+    return out + ((k0, g0), np.full((2, 2), np.inf)) if with_cov else out
 
 
 def _describe(eff, rad, rec):
@@ -239,7 +268,9 @@ def _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts):
                 b = bf
         ratios.append(ratio)
         biases.append(b)
-    return float(np.sqrt(np.sum(np.square(ratios)))), np.mean(biases, axis=0)
+    mean = np.mean(biases, axis=0)
+    return float(np.sqrt(np.sum(np.square(ratios)))), {
+        n: b for n, b in zip(("k", "gamma"), mean) if not np.isnan(b)}
 
 
 def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=False,
@@ -271,8 +302,6 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
     elif likelihood == "exact":
         reason = ("the exact time-domain likelihood (likelihood='exact') covers the "
                   "closed-form model only")
-    elif drive is not None:
-        reason = "the active calibration's drive response is not hydrodynamically corrected yet"
     if reason is None and not explicit:
         rad, h = sts[0]["bead_radius_m"], sts[0].get("distance_to_surface_m")
         if h is not None and h < MIN_DISTANCE_RADII * rad:
@@ -283,28 +312,36 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
     if reason is not None:
         if explicit:
             raise ValueError(f"hydrodynamics=True {reason}")
-        if sts[0].get("bead_radius_m") is not None and (drive is not None
-                                                         or likelihood == "exact"):
+        if sts[0].get("bead_radius_m") is not None and likelihood == "exact":
             notes.append(f"hydrodynamics: off (auto): {reason}")
         return model
     eff, (rad, rad_se) = known_bead_effect(sts, gamma_known[0] if volts and gamma_known
                                            else None)
+    if volts and gamma_known is None:
+        # active calibration in volts: the bead's inertia from its Stokes x Faxen friction
+        eff, _ = known_bead_effect(sts, _bead_gamma(eff, rad, recs[0]))
     desc = _describe(eff, rad, recs[0])
     gamma_fixed = held.get("gamma", (None,))[0]
     if explicit:
         why = "hydrodynamics=True"
     else:
-        ratio, bias = _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts)
+        if volts and drive is not None:
+            # active calibration in volts: Rd, gamma and k all come through the drive
+            from ._hydro_drive import drive_ratio
+
+            ratio, bias = drive_ratio(recs[drive[4]], model, eff, rad, band, excluded, drive)
+        else:
+            ratio, bias = _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts)
         if ratio == 0.0:
             notes.append("hydrodynamics: off (auto): the correction's size could not be "
                          "predicted (the corner frequency is not inside the fitted band, dt >~ "
                          "tau, or the record determines k and gamma too poorly for the "
                          "linearised prediction); hydrodynamics=True to include it")
             return model
-        pred = (f"ignoring it would bias k by {np.expm1(bias[0]) * 100:+.2g} %"
-                + ("" if np.isnan(bias[1]) else
-                   f" and gamma by {np.expm1(bias[1]) * 100:+.2g} %")
-                + f" ({ratio:.2g} SE, predicted from the model spectra on the fitted band)")
+        pred = ("ignoring it would bias " + ", ".join(
+            f"{n} by {np.expm1(b) * 100:+.2g} %" for n, b in bias.items())
+                + f" ({ratio:.2g} SE, predicted from the model spectra on the fitted band"
+                + (" and the drive response)" if volts and drive is not None else ")"))
         if not ratio > AUTO_THRESHOLD:
             notes.append(f"hydrodynamics: off (auto): {pred}, below {AUTO_THRESHOLD:.2g} SE; "
                          "hydrodynamics=True to include it")
@@ -312,5 +349,7 @@ def plan_hydrodynamics(recs, sts, model, method, arg, held, notes, *, volts=Fals
         why = f"auto: {pred}"
     held["hydro_radius"] = (rad, rad_se)
     notes.append(f"hydrodynamics: on ({why}): frequency-dependent friction of the known bead "
-                 f"(Berg-Sorensen & Flyvbjerg 2004 eq. 12), no new parameter: {desc}")
+                 f"(Berg-Sorensen & Flyvbjerg 2004 eq. 12), no new parameter: {desc}"
+                 + ("" if drive is None else "; the drive response with the same friction and "
+                    "the bead's inertia (Tolic-Norrelykke et al. 2006 eq. D3)"))
     return model.add(eff)

@@ -21,7 +21,8 @@ free), ``eps_V^2 = eps^2 / Rd^2``. A known ``gamma`` gives ``Rd = sqrt(gamma_V /
 a photodiode filter multiplies by ``|T(f_d)|``. The measured ratio of the response to the
 recorded stage amplitude is ``|r| = sinc(f_d W) |H(f_d)| |T(f_d)| / Rd``, so ``Rd`` follows
 from ``r`` and the passive fit's ``f_c`` alone (no Stokes), and then ``gamma = gamma_V / Rd^2``
-and ``k = k_V / Rd^2``.
+and ``k = k_V / Rd^2``. With the known bead's hydrodynamics in the model ``H`` is that of
+Tolic-Norrelykke et al. (2006) eq. D3 (:mod:`._drive_fit`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import math
 
 import numpy as np
 
+from ._drive_fit import drive_check, drive_shape_of, rd_from_drive
 from ._models import TrapModel
 from ._options import frequency_ranges
 
@@ -50,7 +52,7 @@ class Plan:
     volts: bool = False
     #: known friction (value, se) [N s/m] for the volts transform (volts + stokes)
     gamma_known: tuple | None = None
-    #: active calibration: (|r|, se, f_d, exposure) of the drive response
+    #: active calibration: (|r|, se, f_d, exposure, index of the driven recording)
     drive: tuple | None = None
     unit: str = "m"
 
@@ -145,7 +147,7 @@ def _stokes_gamma(recs, sts):
 
 def _clean_lines(recs, sts, lines, notes, excluded):
     """Find strong lines (and the drive) in every recording and subtract them; returns the
-    cleaned recordings and the drive response ``(|r|, se, f_d, exposure)`` or None."""
+    cleaned recordings and the drive response ``(|r|, se, f_d, exposure, i)`` or None."""
     out, drive = [], None
     if lines == "keep" and not any((s["drive"] or {}) for s in sts):
         return list(recs), None
@@ -167,7 +169,7 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
             resp = drive_response(x, np.asarray(stage, dtype=float), dt, float(r.exposure),
                                   frequency=f_d)
-            drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure))
+            drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure), i)
             notes.append(f"drive: response at {resp.frequency:.6g} Hz to the stage amplitude "
                          f"{resp.stage_amplitude * 1e9:.4g} nm: |x/x_stage| = "
                          f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} per m (active "
@@ -286,27 +288,11 @@ def _power_of(name):
     return _SCALING.get(base, 0)
 
 
-def _rd_from_drive(values, names, drive, model):
-    """Rd from the drive response (module docstring); ``values`` in volts units."""
-    mag, _, f_d, w = drive
-    ks = [v for n, v in zip(names, values) if n == "k" or n.startswith("k[")]
-    fc = ks[0] / (2.0 * math.pi * values[names.index("gamma")])
-    h = f_d / math.hypot(fc, f_d)
-    blur = abs(float(np.sinc(f_d * w))) if model.blur else 1.0
-    t = 1.0
-    if "f3db" in names:
-        from ..physics import photodiode_transfer
-
-        t = math.sqrt(float(photodiode_transfer(f_d, values[names.index("f3db")],
-                                                values[names.index("diode_alpha")])))
-    return blur * h * t / mag
-
-
-def _outputs(theta, names, plan, n_fit):
+def _outputs(theta, names, plan, n_fit, shape):
     """The reported vector from the fit vector (volts units) and the inputs after it."""
     values = theta[:n_fit]
     if plan.drive is not None:
-        rd = _rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model)
+        rd = rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape)
     else:
         assert plan.gamma_known is not None
         rd = math.sqrt(values[names.index("gamma")] / theta[n_fit])
@@ -317,6 +303,7 @@ def _outputs(theta, names, plan, n_fit):
 
 def _volts_result(res, plan):
     names = list(res.param_names)
+    shape = drive_shape_of(plan)
     n_fit = len(names)
     if plan.drive is not None:
         inp, inp_var = plan.drive[0], plan.drive[1] ** 2
@@ -328,14 +315,15 @@ def _volts_result(res, plan):
     nan = ~np.isfinite(np.diag(c))
     cov_in[:n_fit, :n_fit] = np.where(np.isfinite(c), c, 0.0)
     cov_in[n_fit, n_fit] = inp_var
-    base = _outputs(theta, names, plan, n_fit)
+    base = _outputs(theta, names, plan, n_fit, shape)
     jac = np.zeros((base.size, theta.size))
     for j in range(theta.size):
         h = 1e-6 * abs(theta[j]) if theta[j] != 0 else 1e-30
         up, dn = theta.copy(), theta.copy()
         up[j] += h
         dn[j] -= h
-        jac[:, j] = (_outputs(up, names, plan, n_fit) - _outputs(dn, names, plan, n_fit)) / (2 * h)
+        jac[:, j] = (_outputs(up, names, plan, n_fit, shape)
+                     - _outputs(dn, names, plan, n_fit, shape)) / (2 * h)
     cov = jac @ cov_in @ jac.T
     if nan.any():
         idx = np.flatnonzero(nan)
@@ -379,13 +367,5 @@ def finish_instrument(res, plan: Plan):
     if plan.volts:
         return _volts_result(res, plan)
     if plan.drive is not None and "gamma" in res.param_names:
-        names = list(res.param_names)
-        rd = _rd_from_drive(np.asarray(res.values, float), names, plan.drive, plan.model)
-        se = rd * plan.drive[1] / plan.drive[0]
-        z = (rd - 1.0) / se
-        return dataclasses.replace(res, notes=res.notes + (
-            f"drive: the stage drive gives a position scale of {rd:.5g} +- {se:.2g} m per m of "
-            f"the trace ({z:+.1f} SE from 1" + ("): the position calibration and the drive "
-                                                "disagree; check the units and the stage "
-                                                "amplitude" if abs(z) > 3 else ")"),))
+        return drive_check(res, plan)
     return res
