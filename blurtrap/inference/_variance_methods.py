@@ -84,8 +84,8 @@ def _fit_variance(recs, layout, model, method_name, notes):
         lo, hi = intervals[name]
         fac, unit = _LAB_UNITS.get(name.split("[")[0], (1.0, "SI"))
         txt.append(f"{name} [{lo * fac:.4g}, {hi * fac:.4g}] {unit}")
-    notes.append("95 % profile-likelihood intervals (chi^2 profile, eps^2 >= 0; in "
-                 "result.intervals, SI): " + "; ".join(txt) + ". Use them rather "
+    notes.append("95 % profile-likelihood intervals (chi^2 profile, eps^2 >= 0, weights "
+                 "re-evaluated along the profile; in result.intervals, SI): " + "; ".join(txt) + ". Use them rather "
                  "than value +- 1.96 SE: the variance methods' estimates are skewed and the "
                  "Wald interval under- or over-covers")
     unbounded = [nm for nm, (lo, hi) in intervals.items()
