@@ -35,11 +35,11 @@ import numpy as np
 
 from .._config import float64_scope
 from ..inference import FitError, calibrate, get_model
-from ..inference.internal import as_recordings, default_model
+from ..inference.internal import as_recordings, chi2_sf, default_model
 from ..inference.internal import inspect_frames as _inspect_frames
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
 from ._detector import detector_note
-from ._evidence import _ADDING, _gof_change, _sensitivity_notes
+from ._evidence import _ADDING, SENSITIVITY_SE, _gof_change, _sensitivity_notes
 from ._results import Candidate, Diagnosis
 
 
@@ -73,6 +73,45 @@ def _rank(out, threshold: float) -> list[Candidate]:
                                  (1e300 if c.significant else -1e300)),
                                c.p_value))
     return ranked
+
+
+def _members(effect: str) -> set:
+    return set(effect.split("+"))
+
+
+def _prefer_complete(ranked: list, screened: dict, base) -> list[str]:
+    """When a significant candidate contains the top one's effects and more (the camera core
+    motion_blur+aliasing+tracking_noise over motion_blur+aliasing or tracking_noise), the data
+    cannot tell them apart (their likelihood ratio is not significant) and yet the smaller one's k or gamma
+    differs by more than SENSITIVITY_SE of the base fit's errors, rank the complete one first
+    (as the sensitivity notes advise): otherwise the top refit is confidently wrong.
+    Reorders ``ranked`` in place; returns the note."""
+    if not ranked or not ranked[0].significant or ranked[0].delta_loglik is None:
+        return []
+    top = ranked[0]
+    errs = dict(zip(base.param_names, base.errors))
+    for i, c in enumerate(ranked[1:], start=1):
+        if not (c.significant and c.delta_loglik is not None and c.dof >= top.dof
+                and _members(c.effect) > _members(top.effect)):
+            continue
+        extra = c.dof - top.dof
+        # (flag effects add no parameter, so the two need not be nested: twice the
+        # log-likelihood difference is compared with chi^2 on max(extra, 1) dof both ways)
+        if chi2_sf(2.0 * abs(c.delta_loglik - top.delta_loglik), max(extra, 1)) < 0.05:
+            continue  # the data tell them apart: the ranking decides
+        a, b = screened.get(top.effect), screened.get(c.effect)
+        if a is None or b is None:
+            continue
+        moved = [n for n in ("k", "gamma") if n in a and n in b and np.isfinite(errs.get(n, np.nan))
+                 and abs(a[n] - b[n]) > SENSITIVITY_SE * errs[n]]
+        if moved:
+            ranked.insert(0, ranked.pop(i))
+            return [f"{c.effect} is ranked above {top.effect}: the data cannot tell them apart "
+                    f"(log-likelihood {c.delta_loglik - top.delta_loglik:+.2f} for {extra} more "
+                    f"parameter(s)) but {' and '.join(moved)} differ by more than "
+                    f"{SENSITIVITY_SE:g} SE between them, so the physically complete one is "
+                    "preferred (a camera always has some tracking error)"]
+    return []
 
 
 def _refit_best(recs, k, base, ranked: list, screened: dict) -> list[str]:
@@ -156,6 +195,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     threshold = alpha / m
     out, screened = try_candidates(recs, mdl, k, base, candidates)
     ranked = _rank(out, threshold)
+    notes += _prefer_complete(ranked, screened, base)
     notes += _refit_best(recs, k, base, ranked, screened)
     notes += _sensitivity_notes(base, ranked, screened)
     gof_ok = base.gof["p_value"] >= threshold

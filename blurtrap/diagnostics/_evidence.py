@@ -40,6 +40,9 @@ def _signature(ratio: float, n: int, excess: bool) -> bool:
 _HIGH_F = {"motion_blur": ("deficit rising toward fs/2 (motion blur)", False),
            "aliasing": ("excess near Nyquist (aliasing)", True),
            "motion_blur+aliasing": ("high-frequency shape of a camera's blur and folding", None),
+           "motion_blur+aliasing+tracking_noise": (
+               "high-frequency shape of a camera's blur and folding over a tracking-noise "
+               "floor", None),
            "tracking_noise": ("flat excess floor (tracking noise)", True),
            "exposure_kernel": ("high-frequency shape unlike sinc^2 (exposure kernel)", None),
            "detector_filter": ("high-frequency low-pass deficit (detector filter)", False),
