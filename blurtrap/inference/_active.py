@@ -214,7 +214,8 @@ def _transfer_value(detector_transfer, freq: float) -> complex:
     return t
 
 
-def fluid_response(drive_frequency, corner_frequency, friction=1.0, dissipation_frequency=None):
+def fluid_response(drive_frequency, corner_frequency, friction: complex = 1.0,
+                   dissipation_frequency=None):
     """The bead's response ``H(f_d)`` to a fluid (stage) drive and the two slopes the errors need.
 
     ``H = i f G*/(f_c - f^2/f_m + i f G*)`` (module docstring; TN 2006 eq. D3 in this module's

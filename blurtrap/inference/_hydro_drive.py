@@ -13,6 +13,7 @@ drive and ``hydrodynamics`` on (:mod:`._hydro_known`, module docstring: "Active 
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -70,8 +71,8 @@ def drive_ratio(rec, model, eff, rad, band, excluded, drive):
     from ._active import fluid_response
 
     mag, mag_se, f_d = drive[:3]
-    bias, se, (k0, g0), cov = predicted_bias(rec, model, eff, rad, band, excluded,
-                                             with_cov=True)
+    bias, se, (k0, g0), cov = cast(tuple, predicted_bias(rec, model, eff, rad, band,
+                                                         excluded, with_cov=True))
     if not (np.all(np.isfinite(se)) and np.all(se < _SE_VALID)):
         return 0.0, {}
     fc = k0 / (2.0 * math.pi * g0)

@@ -63,6 +63,7 @@ measured over 50 seeds in benchmarks/RESULTS_instruments.md):
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -253,16 +254,16 @@ def _auto_ratio(recs, model, eff, rad, band, excluded, gamma_fixed, volts):
     ratios, biases = [], []
     for r in recs:
         if volts:
-            b, s = predicted_bias(r, model, eff, rad, band, excluded)
+            b, s = cast(tuple, predicted_bias(r, model, eff, rad, band, excluded))
             ok = np.isfinite(s) & (s < _SE_VALID)
             ratios.append(float(np.max(np.abs(b[ok]) / s[ok])) if ok.any() else 0.0)
             biases.append(b)
             continue
         g = gamma_fixed or _bead_gamma(eff, rad, r)
-        b, s = predicted_bias(r, model, eff, rad, band, excluded, g, g)
+        b, s = cast(tuple, predicted_bias(r, model, eff, rad, band, excluded, g, g))
         ratio = abs(b[0]) / s[0] if np.isfinite(s[0]) else 0.0
         if gamma_fixed is None:
-            bf, sf = predicted_bias(r, model, eff, rad, band, excluded, None, g)
+            bf, sf = cast(tuple, predicted_bias(r, model, eff, rad, band, excluded, None, g))
             if np.all(sf < _SE_VALID):
                 ratio = max(ratio, float(np.max(np.abs(bf) / sf)))
                 b = bf
