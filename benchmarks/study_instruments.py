@@ -241,7 +241,7 @@ def fit_blurtrap(c, x, stage, fit):
     use_stage = c["drive"] is not None and c.get("stage_to_fit", True)
     keys = {"Rd": "displacement_sensitivity", "Rf": "force_sensitivity"}
     out = {q: [] for q in c["qty"]} | {f"{q}_err": [] for q in c["qty"]}
-    out |= {"time": [], "fails": 0, "fail_messages": {}}
+    out |= {"time": [], "fails": 0, "fail_messages": {}, "at_bound": []}
     t_first = None
     for i, row in enumerate(x):
         rec = bt.Recording(row, frame_interval=inst["dt"], exposure=inst["w"], temperature=T,
@@ -255,12 +255,14 @@ def fit_blurtrap(c, x, stage, fit):
             d = dict(zip(r.param_names, map(float, r.values)))
             d |= {f"{n}_err": float(e) for n, e in zip(r.param_names, r.errors)}
             d |= {"k": r.k, "k_err": r.k_err, "gamma": r.gamma, "gamma_err": r.gamma_err}
+            d["at_bound"] = bool(r.at_bounds)  # a parameter (eps^2) at its bound 0
         except (bt.FitError, ValueError) as exc:
             out["fails"] += 1
             m = str(exc)[:100]
             out["fail_messages"][m] = out["fail_messages"].get(m, 0) + 1
             d = {}
         el = time.perf_counter() - t0
+        out["at_bound"].append(bool(d.get("at_bound", False)))
         if i == 0:
             t_first = el
         else:

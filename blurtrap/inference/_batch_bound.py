@@ -12,7 +12,7 @@ import jax
 import numpy as np
 
 from ._batch_host import _prepare
-from ._fit import bound_units, cov_from_hessian, natural_hessian
+from ._bound_errors import bound_units, cov_from_hessian, natural_hessian
 from ._problems import SpectralArgs, spectral_nll
 
 
