@@ -251,7 +251,8 @@ def _bfgs_jit(nll, scale, args, rtol, atol, max_steps):
     return _finish(f, x, args, scale, result, n)
 
 
-def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOutput:
+def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
+           release=True) -> FitOutput:
     """Minimise ``nll(p, args)`` over positive ``p`` starting at ``p = scale``.
 
     Newton on the score first (:class:`blurtrap.inference._newton.SafeguardedNewton`, with
@@ -260,12 +261,13 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -
     lands on a non-minimum) BFGS takes over, compiled only when needed. ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
-    unconstrained ones (:func:`._bound_errors.release_bound`).
+    unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
+    (a fit whose errors are not used: they stay conditional).
     """
     out = _newton_jit(nll, scale, args, rtol, atol)
     if not (bool(out.converged) and bool(out.hessian_pd)):
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
-    return release_bound(nll, scale, args, out)
+    return release_bound(nll, scale, args, out) if release else out
 
 
 @eqx.filter_jit

@@ -125,7 +125,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     moment = _start_vector(recs, layout, model.noise)
-    wout, _ = _fit_held(fit_ml, spectral_nll, moment, sargs, layout.names, fixed)
+    wout, _ = _fit_held(_fit_start, spectral_nll, moment, sargs, layout.names, fixed)
     starts = [wout.value] if bool(wout.success) else []
     names = layout.names
     if not starts or ("k" in names and _leakage_index(
@@ -151,6 +151,11 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
                     interval_source=_interval_source(nll, args, s_out, out, held,
                                                      hessian="fd"))
     return _check_relaxation_resolved(res, recs, "likelihood (exact)")
+
+
+def _fit_start(nll, scale, args):
+    """A fit used only for its estimate (start values): no at-bound error computation."""
+    return fit_ml(nll, scale, args, release=False)
 
 
 #: Switch from Whittle to the exact likelihood above this leakage index (see below).
