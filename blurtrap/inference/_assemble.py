@@ -16,7 +16,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
     """The result of a fit. ``at_bound``: the fit's bound flags (``FitOutput.at_bound``, the
     one rule :func:`blurtrap.inference._fit.at_lower_bound`); those parameters get a NaN error,
     and the others' errors are the fit's: the unconstrained Cramer-Rao bound at the estimate
-    (:func:`blurtrap.inference._fit.release_bound`), or, where ``conditional``
+    (:func:`blurtrap.inference._bound_errors.release_bound`), or, where ``conditional``
     (``FitOutput.conditional``: the full information was not positive definite), conditional
     on the bound and too small; the note says which. ``interval_source``: where the result's
     profile intervals come from (:class:`blurtrap.inference._profile.ProfileIntervals`;

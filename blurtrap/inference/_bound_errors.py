@@ -121,9 +121,9 @@ def unconstrained_cov(nll, value, args, scale, at_bound, fd=False):
 
 
 def release_bound(nll, scale, args, out, fd=False):
-    """``out`` (a ``FitOutput``) with the errors of the parameters not at a bound replaced by the unconstrained
-    ones (:func:`unconstrained_cov`) when some parameter is at its bound; the conditional
-    covariance kept in ``cov_given_bound``. Where the full information is not positive
+    """``out`` (a ``FitOutput``) with the errors of the parameters not at a bound replaced
+    by the unconstrained ones (:func:`unconstrained_cov`) when some parameter is at its bound;
+    the conditional covariance kept in ``cov_given_bound``. Where the full information is not positive
     definite ``cov`` stays conditional and ``conditional`` is True. Decided on the host after
     the fit: nothing is computed when no parameter is at a bound."""
     if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
