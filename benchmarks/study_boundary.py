@@ -3,6 +3,7 @@
 Run:  python benchmarks/study_boundary.py run --regime whittle --n 1000 --out b_whittle.npz
       python benchmarks/study_boundary.py run --regime exact --n 1000 --out b_exact.npz
       python benchmarks/study_boundary.py report b_whittle.npz b_exact.npz
+      python benchmarks/study_boundary.py compare before.npz after.npz  # Wald, same data
 
 Camera 1500 fps, exposure W = 0.1 dt, eps = 2 nm, k = 0.05 pN/nm, bead radius 1.53 um in water
 (gamma = 6 pi 0.00093 Pa s 1.53 um), T = 295 K: eps^2 ends at its bound in ~12 % of the
@@ -111,7 +112,9 @@ def unconstrained_whittle(rec, fit):
 
 
 # ------------------------------------------------------------------------------------------
-def run(regime, n, out, seed, every=25):
+def run(regime, n, out, seed, every=25, wald_only=False):
+    """``calibrate`` per dataset; ``wald_only``: no intervals and no unconstrained refit
+    (values, reported errors and bound flags only)."""
     import blurtrap as bt
 
     bt.enable_x64()
@@ -142,7 +145,11 @@ def run(regime, n, out, seed, every=25):
                 rows["ok"].append(False)
                 continue
             t1 = time.perf_counter()
-            ivs, kinds = fit.intervals, fit.interval_kinds
+            if wald_only:
+                ivs = {nm: (np.nan, np.nan) for nm in NAMES}
+                kinds = {nm: "none" for nm in NAMES}
+            else:
+                ivs, kinds = fit.intervals, fit.interval_kinds
             t2 = time.perf_counter()
             rows["val"].append([fit.params[nm] for nm in NAMES])
             rows["err"].append([float(fit.errors[fit.param_names.index(nm)]) for nm in NAMES])
@@ -150,8 +157,8 @@ def run(regime, n, out, seed, every=25):
             rows["hi"].append([ivs[nm][1] for nm in NAMES])
             rows["profiled"].append([kinds[nm] == "profile" for nm in NAMES])
             rows["bound"].append([nm in fit.at_bounds for nm in NAMES])
-            rows["unc"].append(unconstrained_whittle(rec, fit) if regime == "whittle"
-                               else np.full(3, np.nan))
+            rows["unc"].append(unconstrained_whittle(rec, fit)
+                               if regime == "whittle" and not wald_only else np.full(3, np.nan))
             rows["t_fit"].append(t1 - t0)
             rows["t_int"].append(t2 - t1)
             rows["ok"].append(True)
@@ -163,113 +170,38 @@ def run(regime, n, out, seed, every=25):
 
 
 # ------------------------------------------------------------------------------------------
-# batched (vmapped) Whittle path: the same fit and interval code as calibrate, many records
-# per compiled call
+# batched (vmapped) Whittle path: the public calibrate_batch (same objective, start values,
+# bound rule and at-bound errors as calibrate), Wald errors only
 # ------------------------------------------------------------------------------------------
-def _batch_functions():
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-
-    from blurtrap.inference import _profile
-    from blurtrap.inference._fit import _newton
-    from blurtrap.inference._problems import spectral_nll
-
-    def with_data(shared, pw, lr):
-        return eqx.tree_at(lambda z: (z.power, z.log_ref), shared, (pw, lr))
-
-    @eqx.filter_jit
-    def profiles(shared, power, log_ref, scale, x_hat, cov, at_bound):
-        def one(pw, lr, s, xh, c, ab):
-            return _profile._profile_ends(spectral_nll, with_data(shared, pw, lr), s, xh, c,
-                                          ab, "auto")
-
-        return jax.vmap(one)(power, log_ref, scale, x_hat, cov, at_bound)
-
-    @eqx.filter_jit
-    def unconstrained(shared, power, log_ref, start, off):
-        def one(pw, lr, s):
-            x_hat, _, _, _, _, ok, _ = _newton(_shifted_nll, s, (with_data(shared, pw, lr), off),
-                                               1e-9, 1e-9, 64)
-            return jnp.where(ok, s * jnp.exp(x_hat) - off, jnp.nan)
-
-        return jax.vmap(one)(power, log_ref, start)
-
-    return profiles, unconstrained
-
-
-def run_batched(n, out, seed, chunk=32):
-    """Whittle regime, ``chunk`` records per vmapped call: fits as ``calibrate_batch`` (its
-    own vmapped Newton fit, same objective, start values and bound rule as ``calibrate``),
-    intervals as ``CalibrationResult.intervals`` (profile where ``needs_profile`` says so,
-    else Wald), profiles of all records of a chunk in one vmapped call."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
+def run_batched(n, out, seed, chunk=64):
+    """Whittle regime, ``chunk`` records per ``bt.calibrate_batch`` call: values, reported
+    errors, ``at_bound`` and status per record. No intervals (``calibrate``'s
+    ``result.intervals`` are unchanged by the batch; see ``run``)."""
     import blurtrap as bt
-    from blurtrap.inference import _batch, _profile
-    from blurtrap.inference._fit import fit_ml
-    from blurtrap.inference._models import get_model
-    from blurtrap.inference._problems import RecMeta, SpectralArgs, make_layout, spectral_nll
 
     bt.enable_x64()
     warnings.simplefilter("ignore")
     n_frames = REGIMES["whittle"][0]
     sampler = CirculantSampler(autocovariance(K, GAMMA, W, DT, EPS2, n_frames))
     rng = np.random.default_rng(seed)
-    mdl = get_model("standard")
-    m = n_frames
-    f = np.arange(1, m // 2 + 1) / (m * DT)
-    weight = np.full(f.shape, 1.0)
-    weight[-1] = 0.5
-    layout = make_layout([_batch._Rec(DT, W, T)], "shared", True)
-    shared = SpectralArgs(
-        layout=layout, model=mdl,
-        meta=RecMeta(dt=jnp.asarray([DT]), w=jnp.asarray([W]), temp=jnp.asarray([T])),
-        f=jnp.asarray(f[None]), s2=jnp.asarray(np.sin(np.pi * f * DT)[None] ** 2),
-        power=jnp.zeros((1, f.size)), weight=jnp.asarray(weight[None]),
-        log_ref=jnp.asarray(0.0), block_len=jnp.asarray([float(m)]))
-    profiles, unconstrained = _batch_functions()
-    off = jnp.array([0.0, 0.0, 4.0 * EPS2])
     rows = {key: [] for key in ("val", "err", "lo", "hi", "profiled", "bound", "unc", "ok")}
     t_start = time.time()
     done = 0
     while done < n:
         y = sampler.draw(rng, min(chunk, n - done))
-        b = len(y)
-        power, starts, log_ref = _batch._prepare(y, np.zeros(b, bool), 1, m, DT, W, T, True)
-        pw, lr, st = jnp.asarray(power[:, None, :]), jnp.asarray(log_ref), jnp.asarray(starts)
-        fo = _batch._batch_fit(st, pw, lr, shared)
-        val, cov = np.array(fo.value), np.array(fo.cov)
-        bound, success = np.array(fo.at_bound), np.array(fo.success)
-        for i in np.flatnonzero(~success):  # as calibrate_batch: refit alone
-            a = eqx.tree_at(lambda z: (z.power, z.log_ref), shared, (pw[i], lr[i]))
-            one = fit_ml(spectral_nll, st[i], a)
-            val[i], cov[i] = np.asarray(one.value), np.asarray(one.cov)
-            bound[i], success[i] = np.asarray(one.at_bound), bool(one.success)
-        x_hat = np.maximum(np.log(np.maximum(val, 1e-300) / starts), _profile._LOG_ZERO)
-        low, high, ok_lo, ok_hi, _ = profiles(shared, pw, lr, st, jnp.asarray(x_hat),
-                                              jnp.asarray(np.nan_to_num(cov)),
-                                              jnp.asarray(bound))
-        low, high = np.asarray(low), np.asarray(high)
-        okp = np.asarray(ok_lo) & np.asarray(ok_hi)
-        unc = np.asarray(unconstrained(shared, pw, lr, jnp.asarray(val) + off, off))
-        for i in range(b):
-            err = np.sqrt(np.diag(cov[i]))
-            need = _profile.needs_profile(
-                spectral_nll, eqx.tree_at(lambda z: (z.power, z.log_ref), shared,
-                                          (pw[i], lr[i])), val[i], cov[i], bound[i])
-            lo = np.where(need, np.where(okp[i], low[i], np.nan), val[i] - 1.959964 * err)
-            hi = np.where(need, np.where(okp[i], high[i], np.nan), val[i] + 1.959964 * err)
+        b = bt.calibrate_batch(y, frame_interval=DT, exposure=W, temperature=T)
+        val = np.stack([b.k, b.gamma, b.tracking_var], axis=1)
+        err = np.stack([b.k_err, b.gamma_err, b.tracking_var_err], axis=1)
+        for i in range(len(y)):
             rows["val"].append(val[i])
-            rows["err"].append(err)
-            rows["lo"].append(lo)
-            rows["hi"].append(hi)
-            rows["profiled"].append(need)
-            rows["bound"].append(bound[i])
-            rows["unc"].append(unc[i])
-            rows["ok"].append(bool(success[i]))
-        done += b
+            rows["err"].append(err[i])
+            rows["lo"].append(np.full(3, np.nan))
+            rows["hi"].append(np.full(3, np.nan))
+            rows["profiled"].append(np.zeros(3, bool))
+            rows["bound"].append(np.array([False, False, bool(b.at_bound[i])]))
+            rows["unc"].append(np.full(3, np.nan))
+            rows["ok"].append(bool(b.success[i]))
+        done += len(y)
         np.savez(out, regime="whittle", n_frames=n_frames, seed=seed,
                  wall=time.time() - t_start, t_fit=np.full(1, np.nan),
                  t_int=np.full(1, np.nan), **{key: np.asarray(v) for key, v in rows.items()})
@@ -339,6 +271,37 @@ def report(paths):
             print(f"\nunconstrained eps^2 < 0 in {100 * neg:.1f} % of the fits")
 
 
+def compare(before, after):
+    """Wald coverage with the errors of two runs on the same datasets (same seed and size):
+    ``before`` and ``after`` a change of the reported errors. The estimates must agree."""
+    d0, d1 = np.load(before, allow_pickle=False), np.load(after, allow_pickle=False)
+    m = min(len(d0["ok"]), len(d1["ok"]))
+    ok = d0["ok"][:m] & d1["ok"][:m]
+    v0, v1 = d0["val"][:m][ok], d1["val"][:m][ok]
+    if not np.allclose(v0, v1, rtol=1e-6, atol=0):
+        print(f"WARNING: estimates differ (max rel {np.nanmax(np.abs(v1 / v0 - 1)):.2g})")
+    bound = d1["bound"][:m][ok][:, 2]
+    n, nb = len(v1), int(bound.sum())
+    print(f"\n### {d1['regime']}: {int(d1['n_frames'])} frames, {n} datasets, eps^2 at its "
+          f"bound in {nb} ({100 * nb / n:.1f} %)\n")
+    print(f"| parameter | errors | Wald coverage % (all) | at bound (n = {nb}) | interior | "
+          "mean SE at bound / interior | SD / mean SE |")
+    print("|---|---|---|---|---|---|---|")
+    for j, nm in enumerate(NAMES[:2]):
+        t = TRUE[nm]
+        for label, d in (("before", d0), ("after", d1)):
+            err = d["err"][:m][ok][:, j]
+            hit = np.abs(v1[:, j] - t) <= 1.959964 * err  # NaN error: a miss
+            sd = v1[:, j].std(ddof=1)
+            print(f"| {nm} | {label} | {100 * hit.mean():.1f} | "
+                  f"{100 * hit[bound].mean() if nb else math.nan:.1f} | "
+                  f"{100 * hit[~bound].mean():.1f} | "
+                  f"{np.mean(err[bound]) / np.mean(err[~bound]) if nb else math.nan:.3f} | "
+                  f"{sd / np.mean(err):.3f} |")
+    print(f"\nMC SE of a 95 % coverage: {100 * math.sqrt(0.95 * 0.05 / n):.1f} points "
+          f"(all), {100 * math.sqrt(0.95 * 0.05 / max(nb, 1)):.1f} (at bound).")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -350,15 +313,22 @@ def main(argv=None):
     r.add_argument("--out", required=True)
     r.add_argument("--batched", action="store_true",
                    help="whittle regime only: vmapped fits and profiles (same code paths)")
+    r.add_argument("--wald-only", action="store_true",
+                   help="no intervals and no unconstrained refit (errors only)")
     p = sub.add_parser("report")
     p.add_argument("paths", nargs="+")
+    c = sub.add_parser("compare", help="Wald coverage before/after on the same datasets")
+    c.add_argument("before")
+    c.add_argument("after")
     a = ap.parse_args(argv)
     if a.cmd == "run" and a.batched:
         if a.regime != "whittle":
             ap.error("--batched is for the whittle regime")
         run_batched(a.n, a.out, a.seed)
     elif a.cmd == "run":
-        run(a.regime, a.n, a.out, a.seed)
+        run(a.regime, a.n, a.out, a.seed, wald_only=a.wald_only)
+    elif a.cmd == "compare":
+        compare(a.before, a.after)
     else:
         report(a.paths)
 

@@ -12,12 +12,15 @@ from ._result import CalibrationResult
 
 
 def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=None,
-              at_bound=None, interval_source=None):
+              at_bound=None, interval_source=None, conditional=None):
     """The result of a fit. ``at_bound``: the fit's bound flags (``FitOutput.at_bound``, the
-    one rule :func:`blurtrap.inference._fit.at_lower_bound`); those parameters get a NaN error
-    (the fit already made their variance NaN and the others' conditional on the bound).
-    ``interval_source``: where the result's profile intervals come from
-    (:class:`blurtrap.inference._profile.ProfileIntervals`; default: Wald intervals only)."""
+    one rule :func:`blurtrap.inference._fit.at_lower_bound`); those parameters get a NaN error,
+    and the others' errors are the fit's: the unconstrained Cramer-Rao bound at the estimate
+    (:func:`blurtrap.inference._bound_errors.release_bound`), or, where ``conditional``
+    (``FitOutput.conditional``: the full information was not positive definite), conditional
+    on the bound and too small; the note says which. ``interval_source``: where the result's
+    profile intervals come from (:class:`blurtrap.inference._profile.ProfileIntervals`;
+    default: Wald intervals only)."""
     values = np.asarray(values, dtype=float)
     cov = np.asarray(cov, dtype=float)
     names = layout.names
@@ -40,11 +43,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         cov[bound, :] = 0.0
         cov[:, bound] = 0.0
         cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
-        notes = tuple(notes) + (
-            f"{', '.join(at_bounds)} at the lower bound 0: NaN error there, and the other "
-            "errors are conditional on the bound (smaller than the spread of the estimates "
-            "when the bound is only nearly reached); result.intervals gives profile-likelihood "
-            "intervals that account for it",)
+        notes = tuple(notes) + (_bound_note(at_bounds, conditional),)
     temps = {float(r.temperature) for r in recs}
     if "drift_diffusion" in names:
         notes = tuple(notes) + (
@@ -76,16 +75,37 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
     )
 
 
+def _bound_note(at_bounds, conditional) -> str:
+    """The note of a fit with parameters at their lower bound 0 (``conditional``: the others'
+    errors could not be freed from the bound)."""
+    head = f"{', '.join(at_bounds)} at the lower bound 0: NaN error there"
+    if conditional is not None and bool(np.any(conditional)):
+        return (head + "; the other errors are CONDITIONAL on the bound (the full Fisher "
+                "information, the bound parameter free, is not positive definite) and too "
+                "small: use result.intervals (profile likelihood), which account for the bound")
+    return (head + "; the other errors are the unconstrained Cramer-Rao bound at the estimate "
+            "(the bound parameter counted as free: conservative near the bound); "
+            "result.intervals gives profile-likelihood intervals that account for the bound")
+
+
+def _given_bound(out):
+    """The covariance the profile intervals start from: conditional on a bound where one is
+    reached (``FitOutput.cov_given_bound``), else the fit's."""
+    return out.cov if out.cov_given_bound is None else out.cov_given_bound
+
+
 def _interval_source(nll, args, scale, out, held, hessian="auto"):
     """Profile intervals of the fit (of its free parameters when some are held; none when
     a held input has an error: its Wald errors include the propagated input error, which a
     profile with the input held would leave out)."""
     if held is None:
-        return ProfileIntervals(nll, args, scale, out.value, out.cov, out.at_bound, hessian)
+        return ProfileIntervals(nll, args, scale, out.value, _given_bound(out), out.at_bound,
+                                hessian)
     red, fscale, fargs, rout, free, has_error = held
     if has_error:
         return None
-    src = ProfileIntervals(red, fargs, fscale, rout.value, rout.cov, rout.at_bound, hessian)
+    src = ProfileIntervals(red, fargs, fscale, rout.value, _given_bound(rout), rout.at_bound,
+                           hessian)
     return lambda result: float64_scope(src._compute)(
         tuple(result.param_names[i] for i in free))
 

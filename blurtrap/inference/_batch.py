@@ -17,6 +17,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from .._config import float64_scope, warn_if_float32
 from .._constants import BOLTZMANN, DEFAULT_TEMPERATURE
 from . import _batch_checks as checks
+from ._batch_bound import release_bound_rows
 from ._batch_host import _prepare as _prepare
 from ._batch_result import GOF_THRESHOLD as GOF_THRESHOLD
 from ._batch_result import BatchCalibration as BatchCalibration
@@ -132,8 +133,10 @@ def calibrate_batch(
 
     **Returns:** :class:`BatchCalibration` with per-item values, errors, ``status``,
     ``success`` (status ``"ok"``), ``gof_p``, ``lag1_z`` and ``at_bound`` (an "ok" item
-    with eps^2 held at 0, whose other errors are conditional on it and can be far too
-    small).
+    with eps^2 at its bound 0: its error is NaN and the others' are, as ``calibrate``'s, the
+    unconstrained Cramer-Rao bound at the estimate, the bound parameter counted as free;
+    ``bound_conditional`` marks the rare item where that full information is not positive
+    definite and the errors stay conditional on the bound, too small).
     """
     warn_if_float32("positions", positions)
     mesh = _batch_mesh(shard)
@@ -153,6 +156,11 @@ def calibrate_batch(
     val, cov, success, converged, pd, steps, gof = fits
     for i in np.flatnonzero(~success & ~skip):  # rare: refit alone (Newton, then BFGS)
         _refit_alone(i, y, shared, acq, n_blocks, m, bool(check_units), per, nbin, fits)
+    # a parameter at its bound (NaN variance): the others' errors unconstrained, as calibrate's
+    fit_var = np.diagonal(cov, axis1=1, axis2=2)
+    fit_bound = np.isnan(fit_var).any(axis=1) & np.isfinite(fit_var).any(axis=1) & success
+    conditional = release_bound_rows(np.flatnonzero(fit_bound), y, val, cov, shared, acq,
+                                     n_blocks, m, bool(check_units), _CHUNK)
     gof_dof = max(nbin - n_par, 1)
     z = stats[:, 5]
     status, gof_p = _statuses(val, converged, pd, gof, skip, pre, z, gof_dof, gof_threshold,
@@ -167,6 +175,7 @@ def calibrate_batch(
         with np.errstate(invalid="ignore"):
             at_bound |= val[:, 2] < 1e-6 * stats[:, 4] ** 2
     at_bound &= success
+    conditional &= success
     cov[~success] = np.nan  # never a confident error bar on a failed item
     err = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
     kt = BOLTZMANN * t
@@ -180,6 +189,7 @@ def calibrate_batch(
         method="likelihood" if n_blocks == 1 else "psd", model=mdl.name,
         gof_p=gof_p, gof_statistic=gof[:, 0], gof_dof=int(gof_dof),
         gof_threshold=gof_threshold, lag1_z=z, at_bound=at_bound,
+        bound_conditional=conditional,
     )
 
 

@@ -45,12 +45,18 @@ class BatchCalibration:
     #: per item: lag-1 correlation of the frames in standard errors (``r1 sqrt(N)``); below
     #: 5 the frames carry no temporal information and the item is refused
     lag1_z: np.ndarray | None = None
-    #: per item ("ok" items only): a parameter, as a rule tracking_var, was held at its lower
-    #: bound 0 (``calibrate``'s ``result.at_bounds``), and the other errors are conditional
-    #: on it. They can then be far too small: of 400 simulated camera records (k = 5e-5 N/m,
-    #: W = dt = 1/1500 s, 2 nm tracking noise, 65 536 frames) 43 had eps^2 at 0, and all 43
-    #: had k 5-20 SE off (about 0.86 k), the same fits as ``calibrate`` returns
+    #: per item ("ok" items only): a parameter, as a rule tracking_var, is at its lower
+    #: bound 0 (``calibrate``'s ``result.at_bounds``, the same rule): its error is NaN, and
+    #: the other errors are, as ``calibrate``'s, the unconstrained Cramer-Rao bound at the
+    #: estimate (the inverse of the full information, the bound parameter counted as free;
+    #: conservative near the bound). Conditional on the bound they were far too small: of 400
+    #: simulated camera records (k = 5e-5 N/m, W = dt = 1/1500 s, 2 nm tracking noise,
+    #: 65 536 frames) 43 had eps^2 at 0, and all 43 had k 5-20 conditional SE off
     at_bound: np.ndarray | None = None
+    #: per item: True for an ``at_bound`` item whose full information is not positive
+    #: definite, so that its errors stay *conditional* on the bound (too small; fit it
+    #: with ``calibrate`` and use ``result.intervals``)
+    bound_conditional: np.ndarray | None = None
 
     def __len__(self):
         return len(self.k)

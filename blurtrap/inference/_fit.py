@@ -6,7 +6,9 @@ Every parameter handled here is positive (k, gamma, eps^2, c ...). The optimiser
 inverse Hessian of the negative log-likelihood with respect to the *natural* parameters
 (scaled to O(1) for conditioning), so that a parameter near its lower bound 0 (eps^2) keeps a
 finite, meaningful standard error. One *at* the bound (:func:`at_lower_bound`, the single rule
-of the package) gets a NaN variance, and the others' errors are conditional on the bound.
+of the package) gets a NaN variance, and the others' errors are the unconstrained Cramer-Rao
+bound at the estimate: the inverse of the full observed information in natural parameters,
+the bound parameter included as free (:func:`._bound_errors.release_bound`).
 
 The Newton iteration is the optimistix minimiser
 :class:`blurtrap.inference._newton.SafeguardedNewton`. Each iteration needs the value,
@@ -26,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ._bound_errors import release_bound
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
     as_objective,
@@ -57,6 +60,15 @@ class FitOutput(eqx.Module):
     #: the optimiser's result code (``successful`` exactly when ``converged``); None where
     #: an output was assembled without one
     result: optx.RESULTS | None = None
+    #: with a parameter at its bound (after :func:`._bound_errors.release_bound`): the
+    #: covariance conditional on the bound (the others' block of the information inverted;
+    #: NaN variance for the bound ones), which the profile intervals use for their first
+    #: steps; else None
+    cov_given_bound: jax.Array | None = None
+    #: with a parameter at its bound: True when ``cov`` is still conditional on the bound (the
+    #: full information was not positive definite; the errors are then too small), False
+    #: when it is the unconstrained bound; else None
+    conditional: jax.Array | None = None
 
 
 #: THE bound rule (used by every fit and by the result): a positive parameter is at its lower
@@ -90,11 +102,12 @@ def _finish_from(x, value, grad_x, h_x, scale, converged, n_steps, x_value=None,
     ``x``), e.g. ``x`` plus the final, tiny Newton step. ``result`` (an ``optx.RESULTS``)
     defaults to ``successful`` where ``converged``, else ``nonlinear_divergence``.
 
-    Parameters at their lower bound (:func:`at_lower_bound`, e.g. eps^2 -> 0) are held there:
-    the others' covariance is the inverse of their own block of the information (errors
-    conditional on the bound, as usual for a boundary estimate) and the bound parameter's
-    variance is NaN. Its d2f/du2 would be (H - g)/u^2 with H and g both ~u: rounding noise, and
-    with it the whole covariance was NaN (measured: weak photodiode-filter refits)."""
+    Parameters at their lower bound (:func:`at_lower_bound`, e.g. eps^2 -> 0) are held here:
+    the others' covariance is the inverse of their own block of the information (conditional
+    on the bound) and the bound parameter's variance is NaN. Its d2f/du2 would be
+    (H - g)/u^2 with H and g both ~u: rounding noise, and with it the whole covariance was NaN
+    (measured: weak photodiode-filter refits). :func:`._bound_errors.release_bound` then
+    replaces the conditional errors by the unconstrained ones (natural-parameter Hessian)."""
     u_hat = jnp.exp(x)
     bound = at_lower_bound(grad_x, h_x)
     free = ~bound
@@ -238,7 +251,8 @@ def _bfgs_jit(nll, scale, args, rtol, atol, max_steps):
     return _finish(f, x, args, scale, result, n)
 
 
-def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -> FitOutput:
+def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
+           release=True) -> FitOutput:
     """Minimise ``nll(p, args)`` over positive ``p`` starting at ``p = scale``.
 
     Newton on the score first (:class:`blurtrap.inference._newton.SafeguardedNewton`, with
@@ -246,12 +260,14 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400) -
     :class:`~blurtrap.inference._newton.AbstractObjective` that has one); if it fails (or
     lands on a non-minimum) BFGS takes over, compiled only when needed. ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
-    the compiled code.
+    the compiled code. With a parameter at its bound the others' errors are the
+    unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
+    (a fit whose errors are not used: they stay conditional).
     """
     out = _newton_jit(nll, scale, args, rtol, atol)
     if not (bool(out.converged) and bool(out.hessian_pd)):
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
-    return out
+    return release_bound(nll, scale, args, out) if release else out
 
 
 @eqx.filter_jit
@@ -289,12 +305,15 @@ def fit_ml_fd_newton(
     relative, far below statistical error. The iteration is the safeguarded Newton of
     :func:`fit_ml` (one compiled loop, no host round trip per iteration), at most
     ``max_iter`` steps. The covariance is the inverse of that observed Fisher information in
-    natural parameters. Falls back to optimistix BFGS if Newton does not converge.
+    natural parameters. Falls back to optimistix BFGS if Newton does not converge. With a
+    parameter at its bound the others' errors are the unconstrained ones
+    (:func:`._bound_errors.release_bound`, its Hessian by differences of the autodiff
+    gradient).
     """
     out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
     if not bool(out.converged):
-        return _bfgs_jit(nll, scale, args, tol, tol, max_steps)
-    return out
+        out = _bfgs_jit(nll, scale, args, tol, tol, max_steps)
+    return release_bound(nll, scale, args, out, fd=True)
 
 
 def chi2_sf(x, dof) -> float:

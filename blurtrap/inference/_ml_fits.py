@@ -43,7 +43,7 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
               "f": unpadded(args, args.f), "ratio": unpadded(args, args.power / psd),
               "weight": unpadded(args, args.weight)}
     res = _assemble(recs, layout, model, method_name, out.value, out.cov, gof, notes, extras,
-                    at_bound=out.at_bound,
+                    at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(spectral_nll, args, scale, out, held))
     block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
     return _check_relaxation_resolved(res, recs, method_name, block)
@@ -125,7 +125,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     moment = _start_vector(recs, layout, model.noise)
-    wout, _ = _fit_held(fit_ml, spectral_nll, moment, sargs, layout.names, fixed)
+    wout, _ = _fit_held(_fit_start, spectral_nll, moment, sargs, layout.names, fixed)
     starts = [wout.value] if bool(wout.success) else []
     names = layout.names
     if not starts or ("k" in names and _leakage_index(
@@ -147,10 +147,15 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
     extras = {"loglik": -float(out.nll)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
-                    at_bound=out.at_bound,
+                    at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(nll, args, s_out, out, held,
                                                      hessian="fd"))
     return _check_relaxation_resolved(res, recs, "likelihood (exact)")
+
+
+def _fit_start(nll, scale, args):
+    """A fit used only for its estimate (start values): no at-bound error computation."""
+    return fit_ml(nll, scale, args, release=False)
 
 
 #: Switch from Whittle to the exact likelihood above this leakage index (see below).

@@ -136,4 +136,5 @@ def fit_psd(frequencies, power, *, frame_interval, exposure, n_blocks=1,
                 f"{block_frames} frames" if use_block else "model P_d(f)")]
     rec.n_frames = int(round(float(np.sum(nb)) * 2))
     return _assemble([rec], layout, mdl, "psd (stored)", out.value, out.cov, gof, notes,
-                     {"f": f, "ratio": ratio[0], "weight": weight}, at_bound=out.at_bound)
+                     {"f": f, "ratio": ratio[0], "weight": weight}, at_bound=out.at_bound,
+                     conditional=out.conditional)

@@ -276,8 +276,8 @@ def _alone(rec, i: int, notes: list, kwargs):
         return None
     if res.at_bounds:
         notes.append(f"axis {i} alone: {', '.join(res.at_bounds)} at its bound, so that fit's "
-                     "errors are conditional on it (too small); gamma_precision_gain uses the "
-                     "expected errors instead")
+                     "other errors are the unconstrained bound (wide); gamma_precision_gain "
+                     "uses the expected errors instead")
     return res
 
 

@@ -315,7 +315,7 @@ def test_standard_fit_of_a_hydrodynamic_record_finds_the_trap():
     fit = bt.calibrate(rec, method="likelihood", likelihood="whittle")
     assert abs(fit.k / k - 1) < 0.2, fit.summary()
     assert "tracking_var" in fit.at_bounds
-    assert np.isfinite(fit.k_err) and np.isfinite(fit.gamma_err)  # conditional on eps^2 = 0
+    assert np.isfinite(fit.k_err) and np.isfinite(fit.gamma_err)  # eps^2 counted as free
 
 
 # ------------------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ def test_moderate_quantisation_is_noted(x, step):
 def _honest_se(res, name):
     """The fit's SE, or, where a parameter sits at its bound (eps^2 = 0: 4 of these 8 traces,
     exposure ~ 0 and 0.9 nm noise), the 95 % profile interval's half width / 1.96: the Wald
-    errors there are conditional on the bound and 3-4x smaller than the spread
+    errors there are the unconstrained bound (conservative, not the spread either)
     (benchmarks/RESULTS_boundary.md), so they are not a yardstick for a shift."""
     if not res.at_bounds:
         return res.errors[res.param_names.index(name)]
