@@ -81,6 +81,10 @@ def frame_step(cfg, P, force_params, keys_j, rt, x, delta, frame):
     if cfg.jitter:
         d_next = P.jstd[:, None] * jitter_normals(keys_j, frame + 1, n_t, dtype)
         d = jnp.maximum(rdead + d_next - delta, 0.0)
+        # a frame cannot start before the previous exposure ends: where the dead time was
+        # clipped at 0 the next frame starts late, and its time stamp (the carried offset)
+        # says so (equal to d_next wherever nothing was clipped)
+        d_next = delta - rdead + d
     else:
         d_next = delta
         d = rdead

@@ -280,6 +280,20 @@ def test_timing_jitter_times_and_stationarity():
     assert abs(per.mean() - pred) < Z * per.std(ddof=1) / np.sqrt(per.size)
 
 
+def test_jittered_time_stamps_never_overlap_the_previous_exposure():
+    """Jitter large enough that a frame would start before the previous exposure ends: the
+    frame starts at the end of that exposure (dead time clipped at 0), and its returned time
+    stamp says so. Before, the stamps kept the unclipped times (intervals shorter than the
+    exposure, which the irregular-time likelihood rightly refuses)."""
+    w = 0.8 * TAU
+    x, t = _sim(400, n_traces=64, exposure=w, frame_interval=TAU, method="exact_frames",
+                substeps=None, injections=(TimingJitter(0.1 * TAU),), return_times=True)
+    gaps = np.diff(np.asarray(t), axis=-1)
+    assert gaps.min() >= w * (1 - 1e-9)
+    assert np.mean(np.isclose(gaps, w, rtol=1e-9, atol=0)) > 0.005  # clipping did happen
+    assert np.all(np.isfinite(np.asarray(x)))
+
+
 # --- bad input ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(
