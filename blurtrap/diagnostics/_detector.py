@@ -21,10 +21,18 @@ _FOLDED = TrapModel(blur=True, alias=True, noise=True, name="standard")
 _UNFOLDED = TrapModel(blur=False, alias=False, noise=True, name="photodiode_aa")
 
 
-def detector_note(recs, settings) -> list[str]:
-    """A note when the data prefer the other detector model (or name one that was not set)."""
+#: significant effects that reshape the spectrum's high-frequency end, which neither detector
+#: model has: the comparison would credit their deficit to "no folding"
+_HIGH_F_EFFECTS = ("detector_filter", "hydrodynamics", "exposure_kernel")
+
+
+def detector_note(recs, settings, ranked=()) -> list[str]:
+    """A note when the data prefer the other detector model (or name one that was not set).
+    Not compared when a significant candidate in ``ranked`` reshapes the high frequencies."""
     fs = min(1.0 / float(r.frame_interval) for r in recs)
     if fs < MIN_RATE_HZ:
+        return []
+    if any(c.significant and c.effect in _HIGH_F_EFFECTS for c in ranked):
         return []
     band = (0.0, 0.4 * fs)
     nll = {}

@@ -201,6 +201,6 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     gof_ok = base.gof["p_value"] >= threshold
     adequate = gof_ok and not any(c.significant for c in ranked)
     notes += _verdict_notes(gof_ok, adequate, ranked)
-    notes += detector_note(recs, settings)
+    notes += detector_note(recs, settings, ranked)
     return Diagnosis(model=mdl.name, fit=base, gof=base.gof, adequate=adequate,
                      ranking=tuple(ranked), threshold=threshold, notes=tuple(notes))

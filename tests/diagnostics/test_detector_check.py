@@ -38,3 +38,23 @@ def test_no_detector_note_when_the_settings_fit(integrating):
     dg = bt.diagnose(rec, candidates=[])
     assert dg.model == "standard"
     assert not [n for n in dg.notes if n.startswith("detector")]
+
+
+def test_no_anti_aliasing_note_when_a_detector_filter_explains_the_high_frequencies():
+    """A folded 100 kHz record behind a photodiode low-pass (8 kHz, alpha 0.4): detector_filter
+    ranks first; the detector comparison (two models without the filter) would credit the
+    filter's deficit to "no folding" and tell the user to declare anti-aliasing (before: on
+    every such record of the diagnose study)."""
+    import jax
+    import numpy as np
+
+    from blurtrap.simulate import PhotodiodeFilter
+
+    g = 6 * math.pi * 0.00095 * 1.5e-6
+    x = bt.simulate(5e-5, g, 1e-8, 1e-5, 2**14, key=jax.random.key(3300),
+                    method="exact_frames", tracking_std=0.2e-9,
+                    injections=(PhotodiodeFilter(8e3, 0.4),))
+    rec = bt.Recording(np.asarray(x)[0], frame_interval=1e-5, exposure=1e-8)
+    dg = bt.diagnose(rec)
+    assert dg.best is not None and dg.best.effect == "detector_filter"
+    assert not [n for n in dg.notes if "anti-aliased photodiode" in n], dg.notes
