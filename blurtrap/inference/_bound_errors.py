@@ -86,7 +86,8 @@ def cov_from_hessian(h, s, at_bound):
     eye = np.eye(n)
     h = 0.5 * (h + np.swapaxes(h, -1, -2))
     d = np.diagonal(h, axis1=-2, axis2=-1)
-    ok = np.isfinite(h).all(axis=(-2, -1)) & (np.nan_to_num(d) > 0).all(axis=-1)
+    ok = np.asarray(np.isfinite(h).all(axis=(-2, -1)) & (np.nan_to_num(d) > 0).all(axis=-1),
+                    dtype=bool)
     dinv = 1.0 / np.sqrt(np.where(ok[..., None], d, 1.0))
     hs = np.where(ok[..., None, None], h * dinv[..., :, None] * dinv[..., None, :], eye)
     ev = np.linalg.eigvalsh(hs)

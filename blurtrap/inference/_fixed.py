@@ -101,15 +101,15 @@ def expand(out: FitOutput, free, n: int, full) -> FitOutput:
     value = jnp.asarray(full).at[idx].set(out.value)
 
     def embed(c):
-        return None if c is None else \
-            jnp.zeros((n, n), dtype=c.dtype).at[idx[:, None], idx[None, :]].set(c)
+        return jnp.zeros((n, n), dtype=c.dtype).at[idx[:, None], idx[None, :]].set(c)
 
     at_bound = out.at_bound if out.at_bound is None else \
         jnp.zeros(n, dtype=bool).at[idx].set(out.at_bound)
     return FitOutput(value=value, cov=embed(out.cov), nll=out.nll, grad_norm=out.grad_norm,
                      n_steps=out.n_steps, success=out.success, converged=out.converged,
                      hessian_pd=out.hessian_pd, at_bound=at_bound, result=out.result,
-                     cov_given_bound=embed(out.cov_given_bound), conditional=out.conditional)
+                     cov_given_bound=(None if out.cov_given_bound is None
+                                      else embed(out.cov_given_bound)), conditional=out.conditional)
 
 
 _GRADS: dict = {}
