@@ -33,20 +33,7 @@ def test_whittle_quadrature_matches_the_discrete_sum():
     """The continuum average equals 1/2 sum_j g g^T at the Fourier frequencies, with g from
     central finite differences of the public, checked psd_measured."""
     n, w, eps2 = 4096, 0.5 * DT, 4e-18
-    f = np.arange(1, n) / (n * DT)
-    th0 = np.log([K, GAMMA, eps2])
-
-    def logp(th):
-        k, g, e2 = np.exp(th)
-        return np.log(np.asarray(bt.psd_measured(f, k, g, w, 295.0, DT, e2)))
-
-    grads = []
-    for i in range(3):
-        h = np.zeros(3)
-        h[i] = 1e-5
-        grads.append((logp(th0 + h) - logp(th0 - h)) / 2e-5)
-    g = np.stack(grads, axis=1)
-    brute = 0.5 * g.T @ g
+    brute = _brute_information(K, GAMMA, w, DT, n, eps2)
     ours = np.asarray(whittle_information(K, GAMMA, w, DT, n, 295.0, eps2))
     np.testing.assert_allclose(ours, brute, rtol=2e-3)
 

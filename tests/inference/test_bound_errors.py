@@ -131,6 +131,13 @@ def whittle_at_bound():
     return _first_at_bound(2**14, "whittle")
 
 
+def _assert_k_gamma_cov(fit, ref, rel):
+    """The fit's variances of k and gamma and their covariance equal the reference's."""
+    cov = np.asarray(fit.covariance)
+    for i, j in ((0, 0), (1, 1), (0, 1)):
+        assert cov[i, j] == pytest.approx(ref[i, j], rel=rel), (i, j, cov[i, j], ref[i, j])
+
+
 def test_whittle_errors_are_the_full_information_inverse(whittle_at_bound):
     """k and gamma errors (and their covariance) equal the inverse of the full 3x3 natural
     Hessian of the Whittle likelihood written above to 1e-6; conditional on the bound they
@@ -139,9 +146,7 @@ def test_whittle_errors_are_the_full_information_inverse(whittle_at_bound):
     assert fit.at_bounds == ("tracking_var",)
     assert math.isnan(fit.tracking_var_err)
     ref = _reference_cov(_whittle_ref(x), fit, 1e-18)
-    cov = np.asarray(fit.covariance)
-    for i, j in ((0, 0), (1, 1), (0, 1)):
-        assert cov[i, j] == pytest.approx(ref[i, j], rel=1e-6), (i, j, cov[i, j], ref[i, j])
+    _assert_k_gamma_cov(fit, ref, rel=1e-6)
     # not the conditional errors (the free block of the same information inverted)
     cond = np.linalg.inv(np.linalg.inv(ref)[:2, :2])
     assert fit.k_err > 2 * math.sqrt(cond[0, 0])
@@ -175,9 +180,7 @@ def test_exact_errors_are_the_full_information_inverse():
     x, fit = _first_at_bound(1024, "exact")
     assert fit.at_bounds == ("tracking_var",)
     ref = _reference_cov(_reml_ref(x), fit, 1e-18)
-    cov = np.asarray(fit.covariance)
-    for i, j in ((0, 0), (1, 1), (0, 1)):
-        assert cov[i, j] == pytest.approx(ref[i, j], rel=1e-4), (i, j, cov[i, j], ref[i, j])
+    _assert_k_gamma_cov(fit, ref, rel=1e-4)
     cond = np.linalg.inv(np.linalg.inv(ref)[:2, :2])
     assert fit.k_err > 1.5 * math.sqrt(cond[0, 0])
 

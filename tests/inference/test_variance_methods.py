@@ -153,16 +153,20 @@ _KT = 1.380649e-23 * 295.0
 _N = 32768
 
 
-def _np_expected_variance(k, gamma, w, dt, eps2):
-    """E[(1/N) sum (x - xbar)^2] of N frames, from the frame autocovariance summed directly:
-    C(0) = sigma^2 S(alpha) + eps^2, C(n) = sigma^2 B(alpha) rho^n (numpy, O(N))."""
+def _np_autocovariance(k, gamma, w, dt, eps2):
+    """C(0) = sigma^2 S(alpha) + eps^2 and C(n) = sigma^2 B(alpha) rho^n, n = 1..N-1 (numpy)."""
     sigma2, tau = _KT / k, gamma / k
     a = w / tau
     s = 2 / a - 2 * (-np.expm1(-a)) / a**2
     b = (np.sinh(a / 2) / (a / 2)) ** 2
     lag = np.arange(1, _N)
-    c = sigma2 * b * np.exp(-lag * dt / tau)
-    c0 = sigma2 * s + eps2
+    return sigma2 * s + eps2, lag, sigma2 * b * np.exp(-lag * dt / tau)
+
+
+def _np_expected_variance(k, gamma, w, dt, eps2):
+    """E[(1/N) sum (x - xbar)^2] of N frames, from the frame autocovariance summed directly
+    (numpy, O(N))."""
+    c0, lag, c = _np_autocovariance(k, gamma, w, dt, eps2)
     var_mean = (_N * c0 + 2.0 * np.sum((_N - lag) * c)) / _N**2
     return c0 - var_mean
 
@@ -170,13 +174,7 @@ def _np_expected_variance(k, gamma, w, dt, eps2):
 def _np_variance_se(k, gamma, w, dt, eps2):
     """SD of the sample variance of N Gaussian frames, sqrt((2/N^2) sum_{|n|<N} (N-|n|) C(n)^2),
     summed directly (numpy)."""
-    sigma2, tau = _KT / k, gamma / k
-    a = w / tau
-    s = 2 / a - 2 * (-np.expm1(-a)) / a**2
-    b = (np.sinh(a / 2) / (a / 2)) ** 2
-    lag = np.arange(1, _N)
-    c = sigma2 * b * np.exp(-lag * dt / tau)
-    c0 = sigma2 * s + eps2
+    c0, lag, c = _np_autocovariance(k, gamma, w, dt, eps2)
     return np.sqrt(2.0 / _N**2 * (_N * c0**2 + 2.0 * np.sum((_N - lag) * c**2)))
 
 
