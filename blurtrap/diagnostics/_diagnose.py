@@ -39,7 +39,7 @@ from ..inference.internal import as_recordings, chi2_sf, default_model
 from ..inference.internal import inspect_frames as _inspect_frames
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
 from ._detector import detector_note
-from ._evidence import _ADDING, SENSITIVITY_SE, _gof_change, _sensitivity_notes
+from ._evidence import _ADDING, SENSITIVITY_SE, _gof_change, _sensitivity_notes, moved_by
 from ._results import Candidate, Diagnosis
 
 
@@ -82,14 +82,13 @@ def _members(effect: str) -> set:
 def _prefer_complete(ranked: list, screened: dict, base) -> list[str]:
     """When a significant candidate contains the top one's effects and more (the camera core
     motion_blur+aliasing+tracking_noise over motion_blur+aliasing or tracking_noise), the data
-    cannot tell them apart (their likelihood ratio is not significant) and yet the smaller one's k or gamma
-    differs by more than SENSITIVITY_SE of the base fit's errors, rank the complete one first
+    cannot tell them apart (their likelihood ratio is not significant) and yet k or gamma
+    differs by more than SENSITIVITY_SE of the base fit's errors (:func:`moved_by`), rank the complete one first
     (as the sensitivity notes advise): otherwise the top refit is confidently wrong.
     Reorders ``ranked`` in place; returns the note."""
     if not ranked or not ranked[0].significant or ranked[0].delta_loglik is None:
         return []
     top = ranked[0]
-    errs = dict(zip(base.param_names, base.errors))
     for i, c in enumerate(ranked[1:], start=1):
         if not (c.significant and c.delta_loglik is not None and c.dof >= top.dof
                 and _members(c.effect) > _members(top.effect)):
@@ -102,8 +101,7 @@ def _prefer_complete(ranked: list, screened: dict, base) -> list[str]:
         a, b = screened.get(top.effect), screened.get(c.effect)
         if a is None or b is None:
             continue
-        moved = [n for n in ("k", "gamma") if n in a and n in b and np.isfinite(errs.get(n, np.nan))
-                 and abs(a[n] - b[n]) > SENSITIVITY_SE * errs[n]]
+        moved = [n for n in moved_by(base, a, b) if n in ("k", "gamma")]
         if moved:
             ranked.insert(0, ranked.pop(i))
             return [f"{c.effect} is ranked above {top.effect}: the data cannot tell them apart "

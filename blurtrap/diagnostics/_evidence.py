@@ -169,20 +169,28 @@ def _plausible(name: str, params: dict, recs) -> tuple[bool, str]:
 SENSITIVITY_SE = 2.0
 
 
+def moved_by(base: CalibrationResult, before: dict, after: dict) -> dict:
+    """k (or each k[i]) and gamma that differ between two optima by more than
+    :data:`SENSITIVITY_SE` of the base fit's errors: name -> shift in those SEs."""
+    errs = dict(zip(base.param_names, base.errors))
+    out = {}
+    for name in base.params:
+        if not (name == "gamma" or name == "k" or name.startswith("k[")) \
+                or name not in before or name not in after:
+            continue
+        e = errs[name]
+        if np.isfinite(e) and e > 0 and abs(after[name] - before[name]) > SENSITIVITY_SE * e:
+            out[name] = (after[name] - before[name]) / e
+    return out
+
+
 def _sensitivity_notes(base: CalibrationResult, ranked, screened) -> list[str]:
     out = []
-    errs = dict(zip(base.param_names, base.errors))
     for c in ranked:
         params = screened.get(c.effect)
         if c.significant or params is None or not c.plausible:
             continue
-        shifts = []
-        for name, v0 in base.params.items():
-            if not (name == "gamma" or name == "k" or name.startswith("k[")) or name not in params:
-                continue
-            e = errs[name]
-            if np.isfinite(e) and e > 0 and abs(params[name] - v0) > SENSITIVITY_SE * e:
-                shifts.append(f"{name} by {(params[name] - v0) / e:+.1f} SE")
+        shifts = [f"{n} by {z:+.1f} SE" for n, z in moved_by(base, base.params, params).items()]
         if shifts:
             out.append(f"{c.effect} is not significant, but adding it moves {', '.join(shifts)}: "
                        "the data cannot tell the two models apart and the result depends on the "
