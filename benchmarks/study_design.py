@@ -50,7 +50,7 @@ import blurtrap as bt
 
 bt.enable_x64()
 
-from blurtrap.design import whittle_information  # noqa: E402
+from blurtrap.design import bounded_covariance, whittle_information  # noqa: E402
 from blurtrap.physics import BOLTZMANN  # noqa: E402
 from blurtrap.physics._effects import water_viscosity  # noqa: E402
 
@@ -129,12 +129,16 @@ def scenarios(designs: dict) -> dict:
     return out
 
 
-def predicted(k, recs) -> np.ndarray:
+def predicted(k, recs, bounded=True) -> np.ndarray:
     """Relative SE of (k, gamma, eps^2) from the Whittle information summed over the
-    recordings (one shared eps^2 parameter; eps_i^2 / eps_ref^2 fixed)."""
+    recordings (one shared eps^2 parameter; eps_i^2 / eps_ref^2 fixed); ``bounded``: the
+    scatter with eps^2 >= 0 (bt.design's prediction), else the Cramer-Rao bound."""
     info = sum(np.asarray(whittle_information(k, GAMMA, w, dt, n, T, eps ** 2))
                for dt, w, n, eps in recs)
-    return np.sqrt(np.diag(np.linalg.inv(info)))
+    cov = np.linalg.inv(info)
+    if bounded:
+        cov = np.asarray(bounded_covariance(cov[None]))[0]
+    return np.sqrt(np.diag(cov))
 
 
 def simulate(k, rec, n, key):
@@ -286,6 +290,13 @@ def report(dirs) -> None:
         for r in data["rows"]:
             if r.get("seed_base"):
                 r["name"] += f" (seeds +{r['seed_base']})"
+            # the prediction of the current bt.design (with the bound eps^2 >= 0); rows
+            # written before it held the Cramer-Rao bound there
+            recs = [(x["frame_interval_s"], x["exposure_s"], x["n_frames"], x["tracking_std_m"])
+                    for x in r["recordings"]]
+            r["cramer_rao_se"] = dict(zip(("k", "gamma"), map(float, predicted(r["k"], recs,
+                                                                              False)[:2])))
+            r["predicted_se"] = dict(zip(("k", "gamma"), map(float, predicted(r["k"], recs)[:2])))
             rows.append(r)
         print("meta:", data["meta"])
     for r in rows:

@@ -57,23 +57,61 @@ def _with_friction_prior(infos, friction_se):
     return infos.at[:, 1, 1].add(prec)
 
 
+def bounded_covariance(cov):
+    """The covariance ``cov`` (..., n_par, n_par) of the estimates when eps^2 >= 0 is enforced.
+
+    Near eps^2 = 0 the fit's eps^2 lands on its bound in a fraction ``Phi(-z)`` of the
+    experiments (``z = 1 / relative SE of eps^2``), and there k and gamma move to the
+    constrained optimum, which reduces their scatter below the unconstrained Cramer-Rao bound
+    (design b of benchmarks/RESULTS_design.md: SD/CRB 0.87-0.88). In the quadratic
+    approximation of the log-likelihood the unconstrained estimate is ``Z ~ N(theta, cov)``
+    (eps^2 in natural units) and the constrained one its projection onto ``eps^2 >= 0`` in the
+    metric ``inv(cov)``: ``theta_o = Z_o - (cov_oe / cov_ee) min(Z_e, 0)``, so
+    ``Cov(theta_o) = cov_oo - (1 - v) cov_oe cov_eo / cov_ee`` with ``v`` the variance of the
+    censored normal ``max(Z_e, 0)`` in units of ``cov_ee``. Without a noise parameter (2 x 2),
+    or far from the bound (``v`` -> 1), ``cov`` is returned unchanged. Rows of log eps^2 become
+    the relative scatter of eps^2 itself (the censored estimate can be 0)."""
+    if cov.shape[-1] < 3:
+        return cov
+    s_ee = cov[..., 2, 2]
+    z = 1.0 / jnp.sqrt(s_ee)  # mean / SD of eps^2's estimate (relative SE in log units)
+    cdf = jax.scipy.special.ndtr(z)
+    pdf = jnp.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
+    m1 = z * cdf + pdf
+    m2 = (z * z + 1.0) * cdf + z * pdf
+    v = jnp.clip(m2 - m1 * m1, 0.0, 1.0)
+    c = cov[..., :, 2]
+    return cov - ((1.0 - v) / s_ee)[..., None, None] * c[..., :, None] * c[..., None, :]
+
+
+def bound_probability(cov):
+    """Probability that eps^2's estimate sits at its bound 0: ``Phi(-1 / relative SE)``
+    (0 without a noise parameter)."""
+    if cov.shape[-1] < 3:
+        return jnp.zeros(cov.shape[:-2])
+    return jax.scipy.special.ndtr(-1.0 / jnp.sqrt(cov[..., 2, 2]))
+
+
 def relative_covariance(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise,
-                        friction_se=-1.0):
+                        friction_se=-1.0, bounded=True):
     """Covariance (n_k, n_par, n_par) of log k, log gamma[, log eps^2] at each stiffness in
     ``ks`` (inverse Whittle information; ``friction_se`` >= 0: the friction is known to that
-    relative SE, 0 = exactly, and enters as prior information on log gamma)."""
+    relative SE, 0 = exactly, and enters as prior information on log gamma; ``bounded``: the
+    scatter of the fit with eps^2 >= 0, :func:`bounded_covariance`, else the unconstrained
+    Cramer-Rao bound)."""
     infos = _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
-    return jnp.linalg.inv(_with_friction_prior(infos, jnp.asarray(friction_se, dtype=float)))
+    cov = jnp.linalg.inv(_with_friction_prior(infos, jnp.asarray(friction_se, dtype=float)))
+    return bounded_covariance(cov) if bounded else cov
 
 
 def relative_se(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise,
-                friction_se=-1.0):
+                friction_se=-1.0, bounded=True):
     """Relative SEs (n_k, n_par) of log k, log gamma[, log eps^2] of the recordings ``recs``
     ((dt, W, N) each; shared k, gamma, eps^2) at each stiffness in ``ks``: one vmapped
     evaluation over recordings and stiffnesses (jitted below for the host-side candidates).
-    ``friction_se``: as :func:`relative_covariance`."""
+    ``friction_se``, ``bounded``: as :func:`relative_covariance`."""
     cov = relative_covariance(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
-                              noise, friction_se)
+                              noise, friction_se, bounded)
     return jnp.sqrt(jnp.diagonal(cov, axis1=-2, axis2=-1))
 
 
@@ -90,8 +128,8 @@ def force_sensitivity_se(free_cov, friction_se):
 def _target_per_k(infos, target, friction_se):
     """The target's relative SE at each stiffness, from the data's information."""
     if target == "force_sensitivity":
-        return force_sensitivity_se(jnp.linalg.inv(infos), friction_se)
-    cov = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
+        return force_sensitivity_se(bounded_covariance(jnp.linalg.inv(infos)), friction_se)
+    cov = bounded_covariance(jnp.linalg.inv(_with_friction_prior(infos, friction_se)))
     if target == "k":
         return jnp.sqrt(cov[:, 0, 0])
     if target == "gamma":
@@ -157,12 +195,14 @@ def _evaluate(recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se, *, pho
     """Relative SEs (n_k, n_par) with the friction prior, the force sensitivity's (n_k,) and
     the objective of one candidate (one compiled program per static setting)."""
     infos = _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
-    cov = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
-    free = jnp.linalg.inv(infos)
+    unbounded = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
+    cov = bounded_covariance(unbounded)
+    free = bounded_covariance(jnp.linalg.inv(infos))
     se = jnp.sqrt(jnp.diagonal(cov, axis1=-2, axis2=-1))
     free_se = jnp.sqrt(jnp.diagonal(free, axis1=-2, axis2=-1))
-    return se, free_se, force_sensitivity_se(free, friction_se), _objective(infos, target,
-                                                                              friction_se)
+    crb = jnp.sqrt(jnp.diagonal(unbounded, axis1=-2, axis2=-1))
+    return (se, free_se, force_sensitivity_se(free, friction_se),
+            _objective(infos, target, friction_se), crb, bound_probability(unbounded))
 
 
 _evaluate_jit = jax.jit(_evaluate, static_argnames=("photon_limited", "noise", "target"))
@@ -171,9 +211,9 @@ _evaluate_jit = jax.jit(_evaluate, static_argnames=("photon_limited", "noise", "
 def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
                  target, friction_se=-1.0):
     recs = tuple((float(dt), float(w), float(n)) for dt, w, n in recs)
-    se, free_se, fs, obj = _evaluate_jit(recs, ks, gamma, temperature, eps_ref2, w_ref,
-                                         friction_se, photon_limited=photon_limited,
-                                         noise=eps_ref2 > 0, target=target)
+    se, free_se, fs, obj, crb, p_bound = _evaluate_jit(
+        recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se,
+        photon_limited=photon_limited, noise=eps_ref2 > 0, target=target)
     se, free_se, fs, obj = np.asarray(se), np.asarray(free_se), np.asarray(fs), float(obj)
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
     predicted = {n: se[:, i] for i, n in enumerate(names)}
@@ -192,7 +232,12 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
         # be made, so such a design is never recommended
         obj = math.inf
         label += " (k or gamma not identified)" if free_gamma else " (k not identified)"
-    return Acquisition(label, recs, predicted, obj)
+    crb = np.asarray(crb)
+    unconstrained = {n: crb[:, i] for i, n in enumerate(names) if n in predicted}
+    if friction_se == 0:
+        unconstrained["gamma"] = np.zeros_like(crb[:, 1])
+    return Acquisition(label, recs, predicted, obj, unconstrained_se=unconstrained,
+                       bound_probability=np.asarray(p_bound))
 
 
 def _check(name, value, lo=0.0, unit=""):
@@ -267,7 +312,12 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
            reference_exposure: float | None = None, target: str = "k",
            friction_error: float | None = None, current=None,
            series=(1, 2, 3)) -> DesignResult:
-    """Recommend an acquisition that minimises the expected (Cramer-Rao) error.
+    """Recommend an acquisition that minimises the expected error of the calibration.
+
+    The expected errors are the Cramer-Rao bound of the Whittle Fisher information, corrected
+    for the bound eps^2 >= 0 of the fit (near it the estimates scatter less than the bound
+    says; :func:`bounded_covariance`): ``predicted_se`` is the scatter of the estimates one
+    should see over repeated experiments, ``best.unconstrained_se`` the Cramer-Rao bound.
 
     **Arguments** (SI):
 

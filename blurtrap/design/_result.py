@@ -10,19 +10,31 @@ import numpy as np
 @dataclasses.dataclass(frozen=True)
 class Acquisition:
     """One candidate: recordings as (frame_interval [s], exposure [s], n_frames), the predicted
-    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective."""
+    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective.
+
+    ``predicted_se`` is the expected scatter of the fit's estimates with eps^2 >= 0 enforced
+    (below the Cramer-Rao bound where eps^2 often lands on its bound 0, see
+    :func:`blurtrap.design.bounded_covariance`); ``unconstrained_se`` is the Cramer-Rao bound
+    itself (what calibrate reports as the SE of a fit whose eps^2 sits at the bound), and
+    ``bound_probability`` the predicted fraction of fits with eps^2 at 0 per stiffness."""
 
     label: str
     recordings: tuple
     predicted_se: dict  # name -> relative SE (fraction) at each k of the range
     objective: float
+    unconstrained_se: dict = dataclasses.field(default_factory=dict)
+    bound_probability: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"label": self.label, "objective": self.objective,
                 "recordings": [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
                                for r in self.recordings],
                 "predicted_relative_se": {n: [float(x) for x in v]
-                                          for n, v in self.predicted_se.items()}}
+                                          for n, v in self.predicted_se.items()},
+                "cramer_rao_relative_se": {n: [float(x) for x in v]
+                                           for n, v in self.unconstrained_se.items()},
+                "eps2_at_bound_probability": (None if self.bound_probability is None else
+                                              [float(x) for x in self.bound_probability])}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,9 +83,18 @@ class DesignResult:
                          f"{100 * np.max(c.predicted_se['k']):8.3g} "
                          + (f"{100 * sg:11.3g}" if sg > 0 else f"{'known':>11s}")
                          + (f" {100 * c.objective:12.3g}" if extra else ""))
+        p_bound = float(np.max(self.best.bound_probability)) \
+            if self.best.bound_probability is not None else 0.0
+        if p_bound > 0.01:
+            crb = self.best.unconstrained_se
+            lines.append(f"  eps^2 is predicted at its bound 0 in {100 * p_bound:.2g} % of fits "
+                         "of the recommended design; the SEs above are the scatter with that "
+                         "bound (Cramer-Rao bound without it: k "
+                         f"{100 * np.max(crb['k']):.3g} %, gamma "
+                         f"{100 * np.max(crb['gamma']):.3g} %)")
         known = self.settings.get("friction_error")
-        lines.append("(* recommended; SEs from the Whittle Fisher information, relative, "
-                     "worst over the k range"
+        lines.append("(* recommended; SEs from the Whittle Fisher information with the bound "
+                     "eps^2 >= 0, relative, worst over the k range"
                      + ("" if known is None else
                         f"; friction known to {100 * known:.3g} % (SE gamma is that prior)")
                      + ")")

@@ -21,6 +21,24 @@ def se(info):
     return np.sqrt(np.diag(np.linalg.inv(np.asarray(info))))
 
 
+def censored(cov):
+    """The covariance of the estimates with eps^2 >= 0 (projected Gaussian; scipy's normal
+    moments and the precision-matrix form of the projection, written apart from
+    blurtrap.design.bounded_covariance): theta_o = Z_o + b (max(Z_e, 0) - Z_e) with
+    b = -P_oo^-1 P_oe, eps^2 relative so that its mean is 1 and its SD sqrt(cov_ee)."""
+    from scipy.stats import norm
+
+    sd = math.sqrt(cov[2, 2])
+    z = 1 / sd
+    mean = z * norm.cdf(z) + norm.pdf(z)
+    var = (z * z + 1) * norm.cdf(z) + z * norm.pdf(z) - mean**2  # of max(Z_e, 0) / sd
+    p = np.linalg.inv(cov)
+    b = np.append(-np.linalg.solve(p[:2, :2], p[:2, 2]), 1.0)
+    # theta_o = U + b_o Z_e' with Z_e' = max(Z_e, 0) and U independent of Z_e
+    out = cov - np.outer(b, b) * cov[2, 2] * (1 - var)
+    return out
+
+
 @pytest.mark.parametrize("w", [DT, 0.1 * DT])
 def test_whittle_information_matches_exact_gaussian_information(w):
     """Long-record (Whittle) and exact information agree to O(1/N) at N = 512."""
@@ -147,15 +165,22 @@ def test_known_friction_is_prior_information_on_log_gamma():
     n, w, eps2 = 4096, 0.3 * DT, 4e-18
     brute = _brute_information(K, GAMMA, w, DT, n, eps2)
     recs = [(DT, w, n)]
-    held = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True, 0.0))[0]
-    block = brute[np.ix_([0, 2], [0, 2])]
-    np.testing.assert_allclose(held[[0, 2]], np.sqrt(np.diag(np.linalg.inv(block))), rtol=3e-3)
-    assert held[1] < 1e-9
-    prior = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True, 0.05))[0]
-    with_prior = brute + np.diag([0.0, 1 / 0.05**2, 0.0])
-    np.testing.assert_allclose(prior, np.sqrt(np.diag(np.linalg.inv(with_prior))), rtol=3e-3)
-    free = np.asarray(relative_se(recs, [K], GAMMA, 295.0, eps2, DT, False, True))[0]
-    np.testing.assert_allclose(free, np.sqrt(np.diag(np.linalg.inv(brute))), rtol=3e-3)
+    for bounded in (False, True):
+        def ref(info):
+            cov = np.linalg.inv(info)
+            return np.sqrt(np.diag(censored(cov) if bounded else cov))
+
+        args = (recs, [K], GAMMA, 295.0, eps2, DT, False, True)
+        held = np.asarray(relative_se(*args, 0.0, bounded=bounded))[0]
+        block = brute.copy()
+        block[1, :], block[:, 1], block[1, 1] = 0.0, 0.0, 1e24  # gamma held
+        np.testing.assert_allclose(held[[0, 2]], ref(block)[[0, 2]], rtol=3e-3)
+        assert held[1] < 1e-9
+        prior = np.asarray(relative_se(*args, 0.05, bounded=bounded))[0]
+        with_prior = brute + np.diag([0.0, 1 / 0.05**2, 0.0])
+        np.testing.assert_allclose(prior, ref(with_prior), rtol=3e-3)
+        free = np.asarray(relative_se(*args, bounded=bounded))[0]
+        np.testing.assert_allclose(free, ref(brute), rtol=3e-3)
 
 
 def test_determinant_and_force_sensitivity_objectives():
@@ -163,7 +188,7 @@ def test_determinant_and_force_sensitivity_objectives():
     the force sensitivity sqrt(v_kk + v_gg/4 - v_kg + s^2/4) (Rf = k' sqrt(gamma0/gamma') of a
     volts fit), from the brute-force information."""
     n, eps2 = 4096, 4e-18
-    cov = np.linalg.inv(_brute_information(K, GAMMA, DT, DT, n, eps2))
+    cov = censored(np.linalg.inv(_brute_information(K, GAMMA, DT, DT, n, eps2)))
     kw = dict(k=K, gamma=GAMMA, max_fps=1500, n_frames=n, tracking_std=2e-9, series=())
     det = bt.design(target="determinant", **kw)
     naive = next(c for c in det.candidates if c.label.startswith("W = dt"))
