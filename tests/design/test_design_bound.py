@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import norm
 
 import blurtrap as bt
 from blurtrap.design import bound_probability, bounded_covariance, whittle_information
