@@ -11,6 +11,9 @@ the timed sweep (another key) runs on the same grid. The loop baseline runs in t
 process, right after its sweep: for each of the first ``--loop-traces`` traces of one cell,
 ``simulate`` one trace, then ``calibrate`` it once per model (Whittle likelihood: the
 objective ``calibrate_batch`` uses), so both rates come from the same process and minutes.
+The same process then times the sweep with a second calibration method
+(``methods=("whittle", "psd")``, after its own warm-up): twice the fits of the same
+simulated frames.
 Memory: peak RSS after the warm-up, after the timed sweeps and after sweeps of 4 and 16
 times as many traces of one cell (bounded memory: the peak should not grow from the first
 to the second), next to the bytes of one chunk of positions (``chunk_traces x n_frames x 8``).
@@ -27,12 +30,15 @@ import socket
 import subprocess
 import sys
 import time
+from typing import Any
 
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parent
 GRID = {"k": [2e-5, 5e-5], "gamma": 2.7e-8, "exposure": [1e-4, 6.667e-4],
         "frame_interval": 6.667e-4, "tracking_std": 1e-9}
 MODELS = ("naive", "standard")
+#: the methods row: every model fitted by each of these calibration methods
+METHODS = ("whittle", "psd")
 
 
 def _rss_mb():
@@ -51,8 +57,8 @@ def worker(args):
 
     bt.enable_x64()
     bt.enable_compilation_cache(args.cache)
-    kw = dict(n_frames=args.frames, models=MODELS, chunk_traces=args.chunk, progress=False,
-              gof_threshold=0.0)
+    kw: dict[str, Any] = dict(n_frames=args.frames, models=MODELS, chunk_traces=args.chunk,
+                              progress=False, gof_threshold=0.0)
     bt.sweep(GRID, n_traces=args.chunk, key=jax.random.key(0), **kw)  # compile every shape
     rss_warm = _rss_mb()
     if args.process is not None:
@@ -65,13 +71,14 @@ def worker(args):
         res = bt.sweep(GRID, n_traces=args.traces, key=jax.random.key(1 + r), **kw)
         wall = min(wall, time.perf_counter() - t0)
         cpu = min(cpu, time.process_time() - c0)
-    n_cells = int(np.prod(res.shape[:-1]))
+    n_cells = int(np.prod(res.shape[:-2]))  # the grid's axes (not model, method)
     out = {"devices": len(jax.local_devices()), "processes": jax.process_count(),
            "wall_s": wall, "cpu_s": cpu, "frames": n_cells * args.traces * args.frames,
            "fits": n_cells * args.traces * len(MODELS), "n_ok": int(res["n_ok"].sum()),
            "rss_warm_mb": rss_warm, "rss_sweep_mb": _rss_mb()}
     if args.loop:
         out.update(loop(args, bt, jax, np))
+        out.update(methods_row(args, bt, jax, kw))
         one = {"k": GRID["k"][0], **{k: v for k, v in GRID.items() if k != "k"}}
         for mult in (4, 16):  # one cell, 4x then 16x the traces: the peak should not move
             bt.sweep(one, n_traces=mult * args.traces, key=jax.random.key(2), **kw)
@@ -105,6 +112,23 @@ def loop(args, bt, jax, np):
     return {"loop_wall_s": wall, "loop_cpu_s": cpu,
             "loop_frames": args.loop_traces * args.frames,
             "loop_fits": args.loop_traces * len(MODELS)}
+
+
+def methods_row(args, bt, jax, kw):
+    """The timed sweep again with ``methods=METHODS`` (same grid, traces and keys)."""
+    kw = {**kw, "methods": METHODS}
+    bt.sweep(GRID, n_traces=args.chunk, key=jax.random.key(0), **kw)  # compile the PSD fits
+    wall = cpu = float("inf")
+    for r in range(args.repeats):
+        c0, t0 = time.process_time(), time.perf_counter()
+        res = bt.sweep(GRID, n_traces=args.traces, key=jax.random.key(1 + r), **kw)
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+    n_cells = len(GRID["k"]) * len(GRID["exposure"])
+    return {"methods_wall_s": wall, "methods_cpu_s": cpu,
+            "methods_fits": n_cells * args.traces * len(MODELS) * len(METHODS),
+            "methods_n_ok": int(res["n_ok"].sum()),
+            "methods_blocks": sorted({int(b) for b in res["n_blocks"][..., 1:].ravel()})}
 
 
 def _env(devices):
@@ -169,6 +193,14 @@ def table(rows, args):
                  f"{base['loop_cpu_s']:.2f} | {base['loop_frames'] / base['loop_wall_s']:.3g} "
                  f"| {loop_rate:.1f} | {1e3 * base['loop_cpu_s'] / base['loop_fits']:.2f} | "
                  f"{loop_rate / (base['fits'] / base['wall_s']):.2f} | - | - |")
+    m_rate = base["methods_fits"] / base["methods_wall_s"]
+    lines.append(f"| sweep, 1 device, methods {' + '.join(METHODS)} ({METHODS[1]}: "
+                 f"{'/'.join(map(str, base['methods_blocks']))} blocks) | "
+                 f"{base['methods_wall_s']:.2f} | {base['methods_cpu_s']:.2f} | "
+                 f"{base['frames'] / base['methods_wall_s']:.3g} | {m_rate:.1f} | "
+                 f"{1e3 * base['methods_cpu_s'] / base['methods_fits']:.2f} | "
+                 f"{base['wall_s'] / base['methods_wall_s']:.2f} | "
+                 f"{base['methods_n_ok']}/{base['methods_fits']} | - |")
     chunk_mb = args.chunk * args.frames * 8 / 2**20
     lines += ["", f"Memory (1-device process; ru_maxrss is the peak so far): one chunk of "
               f"positions is {chunk_mb:.1f} MB; peak RSS {base['rss_sweep_mb']:.0f} MB after the "
@@ -182,7 +214,7 @@ def table(rows, args):
 
 
 def main():
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--process", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--port", default=None, help=argparse.SUPPRESS)

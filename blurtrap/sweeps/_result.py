@@ -10,20 +10,28 @@ import numpy as np
 from ..effects import lab_units
 from ._grid import INJECTIONS, PARAMS, Grid
 
+#: axes of labels (not numbers): no lab unit, not an x axis of ``plot``
+LABEL_AXES = ("model", "method", INJECTIONS)
+#: counts that are not failures (the others ``n_<status>`` are, in ``summary``)
+_NOT_FAILURES = ("n_items", "n_ok", "n_at_bound", "n_blocks")
+
 
 @dataclasses.dataclass(frozen=True)
 class SweepResult:
-    """Per grid cell and model: statistics of the fits of a :func:`sweep` (SI units).
+    """Per grid cell, model and method: statistics of the fits of a :func:`sweep` (SI units).
 
-    - `dims`: axis names, the grid's axes in order, then ``"model"``.
-    - `coords`: axis name -> values (SI; labels for ``model`` and ``injections``).
+    - `dims`: axis names, the grid's axes in order, then ``"model"`` and ``"method"``.
+    - `coords`: axis name -> values (SI; labels for ``model``, ``method`` and
+      ``injections``).
     - `data`: statistic name -> array of shape ``shape``. For ``p`` in ``k``, ``gamma``,
       ``tracking_var``: ``mean_p``, ``true_p``, ``bias_p`` [% of the true value; NaN where it
       is 0], ``sd_p``, ``se_p`` (mean SE), ``sd_se_p``, ``coverage_p`` (fraction of 95 %
       Wald intervals covering the true value); counts ``n_items``, ``n_ok``, ``n_at_bound``
-      and ``n_<status>`` (``n_not_converged``, ``n_inadequate``, ``n_refused`` ...).
+      and ``n_<status>`` (``n_not_converged``, ``n_inadequate``, ``n_refused`` ...);
+      ``n_blocks``, the block count the method used in the cell (1: Whittle).
     - `fixed`: the parameters held fixed over the grid (SI).
-    - `attrs`: n_frames, n_traces, chunk_traces, chunks_done, n_chunks, method, ...
+    - `attrs`: n_frames, n_traces, chunk_traces, chunks_done, n_chunks, simulate_method,
+      processes.
     """
 
     dims: tuple[str, ...]
@@ -33,12 +41,15 @@ class SweepResult:
     attrs: dict
 
     @classmethod
-    def from_stats(cls, grid: Grid, models, flat: dict[str, np.ndarray], attrs: dict):
-        shape = grid.shape + (len(models),)
+    def from_stats(cls, grid: Grid, models, methods, flat: dict[str, np.ndarray], attrs: dict):
+        """From per-cell statistics of shape (cells, models x methods), model-major."""
+        shape = grid.shape + (len(models), len(methods))
         coords = dict(grid.coords)
         coords["model"] = np.asarray(models, dtype=object)
+        coords["method"] = np.asarray(methods, dtype=object)
         data = {k: np.asarray(v).reshape(shape) for k, v in flat.items()}
-        return cls(grid.dims + ("model",), coords, data, dict(grid.fixed), dict(attrs))
+        return cls(grid.dims + ("model", "method"), coords, data, dict(grid.fixed),
+                   dict(attrs))
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -64,7 +75,7 @@ class SweepResult:
             yield idx, {d: self.coords[d][i] for d, i in zip(self.dims, idx)}
 
     def to_dataframe(self):
-        """One row per cell and model: the coordinates (SI) and every statistic. Needs
+        """One row per cell, model and method: the coordinates (SI) and every statistic. Needs
         pandas (``pip install "blurtrap[pandas]"``)."""
         try:
             import pandas as pd
@@ -78,7 +89,8 @@ class SweepResult:
 
     def to_xarray(self):
         """An ``xarray.Dataset`` with the grid's dimensions and coordinates (SI; units in
-        the attributes). Needs xarray (``pip install xarray``)."""
+        the attributes). Needs xarray (``pip install xarray``). Select a method with a dict,
+        ``ds.sel({"method": "psd"})``: the keyword ``method`` of ``sel`` is xarray's own."""
         try:
             import xarray as xr
         except ImportError:
@@ -87,7 +99,7 @@ class SweepResult:
         for d in self.dims:
             attrs = {"units": PARAMS[d][0]} if d in PARAMS else {}
             values = self.coords[d]
-            if d in ("model", INJECTIONS):
+            if d in LABEL_AXES:
                 values = np.asarray([str(v) for v in values])
             coords[d] = xr.Variable(d, values, attrs=attrs)
         ds = xr.Dataset({k: (self.dims, v) for k, v in self.data.items()}, coords=coords,
@@ -96,16 +108,15 @@ class SweepResult:
         return ds
 
     def summary(self, params=("k", "gamma")) -> str:
-        """A table in lab units: per cell and model, the coordinates, then for each fitted
-        parameter its mean, bias [%], SD/SE and 95 % coverage, and the failures."""
+        """A table in lab units: per cell, model and method, the coordinates, then for each
+        fitted parameter its mean, bias [%], SD/SE and 95 % coverage, and the failures."""
         head = [_lab_label(d) for d in self.dims]
         for p in params:
             fac, unit = lab_units(p)
             head += [f"{p} mean [{unit}]", f"{p} bias [%]", f"{p} SD/SE", f"{p} cover"]
         head += ["ok/items", "failures"]
         lines = [_fixed_line(self.fixed, self.attrs), " | ".join(head)]
-        fail = [k for k in self.data if k.startswith("n_") and k not in
-                ("n_items", "n_ok", "n_at_bound")]
+        fail = [k for k in self.data if k.startswith("n_") and k not in _NOT_FAILURES]
         for idx, labels in self._rows():
             cells = [_lab_value(d, v) for d, v in labels.items()]
             for p in params:
@@ -132,10 +143,9 @@ class SweepResult:
     def plot(self, x: str, y: str = "bias_k", *, ax=None):
         """Plot statistic `y` against grid axis `x` (lab units), one line per combination of
         the other axes. Returns the figure."""
-        if x not in self.dims or x == "model":
+        if x not in self.dims or x in LABEL_AXES:
             raise ValueError(f"x must be a numeric grid axis, one of "
-                             f"{[d for d in self.dims if d not in ('model', INJECTIONS)]}; "
-                             f"got x = {x!r}")
+                             f"{[d for d in self.dims if d not in LABEL_AXES]}; got x = {x!r}")
         if y not in self.data:
             raise ValueError(f"y must be a statistic, one of {sorted(self.data)}; got y = {y!r}")
         import matplotlib.pyplot as plt

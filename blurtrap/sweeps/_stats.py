@@ -1,10 +1,11 @@
 """Streaming statistics of the fits of a sweep: per chunk, then merged in chunk order.
 
-Each chunk of trajectories of a cell gives, per model and parameter, the count, mean and sum
-of squared deviations (two passes over the chunk), the mean standard error and the number of
-95 % Wald intervals that cover the true value. Chunks are merged with the pairwise update of
-Chan, Golub & LeVeque (1979), ``M2 = M2_a + M2_b + delta^2 n_a n_b / n``, always in chunk order,
-so the result does not depend on how the chunks were spread over devices or processes.
+Each chunk of trajectories of a cell gives, per model, method and parameter, the count, mean
+and sum of squared deviations (two passes over the chunk), the mean standard error and the
+number of 95 % Wald intervals that cover the true value. Chunks are merged with the pairwise
+update of Chan, Golub & LeVeque (1979), ``M2 = M2_a + M2_b + delta^2 n_a n_b / n``, always in
+chunk order, so the result does not depend on how the chunks were spread over devices or
+processes.
 """
 
 from __future__ import annotations
@@ -19,18 +20,19 @@ STATUSES = ("ok", "not converged", "singular Fisher information", "relaxation no
 #: two-sided 95 % normal quantile
 Z95 = 1.959963984540054
 
-#: per-parameter accumulators (float64 arrays of shape cells x models x parameters)
+#: per-parameter accumulators (float64 arrays of shape cells x fits x parameters; a sweep's
+#: fits are its (model, method) pairs, model-major)
 PARAM_FIELDS = ("n", "mean", "m2", "n_se", "mean_se", "n_cover")
-#: per-cell accumulators (cells x models [x statuses])
+#: per-cell accumulators (cells x fits [x statuses])
 CELL_FIELDS = ("n_items", "n_at_bound", "status")
 
 
-def empty(n_cells: int, n_models: int) -> dict[str, np.ndarray]:
-    shape = (n_cells, n_models, len(FITTED))
+def empty(n_cells: int, n_fits: int) -> dict[str, np.ndarray]:
+    shape = (n_cells, n_fits, len(FITTED))
     acc: dict[str, np.ndarray] = {f: np.zeros(shape) for f in PARAM_FIELDS}
-    acc["n_items"] = np.zeros((n_cells, n_models))
-    acc["n_at_bound"] = np.zeros((n_cells, n_models))
-    acc["status"] = np.zeros((n_cells, n_models, len(STATUSES)))
+    acc["n_items"] = np.zeros((n_cells, n_fits))
+    acc["n_at_bound"] = np.zeros((n_cells, n_fits))
+    acc["status"] = np.zeros((n_cells, n_fits, len(STATUSES)))
     return acc
 
 
@@ -40,8 +42,8 @@ def _status_kind(s: str) -> int:
 
 
 def chunk_stats(batch, truth: dict[str, float]) -> dict[str, np.ndarray]:
-    """Statistics of one ``BatchCalibration`` (one cell, one model, one chunk): the fields
-    of :func:`empty` for a single cell and model (leading shape dropped)."""
+    """Statistics of one ``BatchCalibration`` (one cell, model, method and chunk): the fields
+    of :func:`empty` for a single cell and fit (leading shape dropped)."""
     ok = np.asarray(batch.success, dtype=bool)
     out: dict[str, np.ndarray] = {f: np.zeros(len(FITTED)) for f in PARAM_FIELDS}
     for j, name in enumerate(FITTED):
@@ -92,9 +94,9 @@ def merge(acc: dict[str, np.ndarray], new: dict[str, np.ndarray]) -> dict[str, n
 
 
 def summarise(acc: dict[str, np.ndarray], true: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Derived statistics per cell and model: ``mean_*``, ``bias_*`` [%], ``sd_*``, ``se_*``
-    (mean SE), ``sd_se_*`` (SD / mean SE), ``coverage_*`` (of the 95 % Wald interval), with
-    counts ``n_ok``, ``n_items``, ``n_at_bound`` and ``n_<status>``."""
+    """Derived statistics per cell and fit (model, method): ``mean_*``, ``bias_*`` [%],
+    ``sd_*``, ``se_*`` (mean SE), ``sd_se_*`` (SD / mean SE), ``coverage_*`` (of the 95 % Wald
+    interval), with counts ``n_ok``, ``n_items``, ``n_at_bound`` and ``n_<status>``."""
     data: dict[str, np.ndarray] = {}
     with np.errstate(invalid="ignore", divide="ignore"):
         for j, name in enumerate(FITTED):

@@ -1,10 +1,10 @@
 r"""Simulation-and-calibration sweeps over a parameter grid: :func:`sweep`.
 
 Work is cut into units (cell ``g``, chunk ``c``): ``chunk_traces`` trajectories of one grid cell
-simulated with the key ``fold_in(fold_in(key, g), c)`` and calibrated with every model. A unit
-is computed the same way whatever runs it, and the per-unit statistics are merged in chunk
-order, so the result is the same bit for bit on one device, on several local devices and on
-several processes.
+simulated with the key ``fold_in(fold_in(key, g), c)`` and calibrated with every model and
+calibration method. A unit is computed the same way whatever runs it, and the per-unit
+statistics are merged in chunk order, so the result is the same bit for bit on one device, on
+several local devices and on several processes.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from ..inference import calibrate_batch
 from ..simulate import simulate
 from . import _stats as st
 from ._grid import Grid, make_grid, truths
+from ._methods import Method, parse_methods
 from ._result import SweepResult
 
 _MAX_AUTO_CHUNK = 64  # calibrate_batch fits 64 rows per compiled call
@@ -71,16 +72,16 @@ def _fingerprint(grid: Grid, **config) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _load_state(out, fingerprint, n_cells, n_models):
+def _load_state(out, fingerprint, n_cells, n_fits):
     """(accumulators, chunks done) from ``out``, or a fresh start when it does not exist."""
     if out is None or not os.path.exists(out):
-        return st.empty(n_cells, n_models), 0
+        return st.empty(n_cells, n_fits), 0
     with np.load(out, allow_pickle=False) as z:
         if str(z["fingerprint"]) != fingerprint:
             raise ValueError(
                 f"out = {out!r} holds the state of a different sweep (grid, n_frames, n_traces, "
-                "chunk_traces, models, method or key differ); pass another out path or delete "
-                "the file to start again")
+                "chunk_traces, models, methods, simulation method, gof_threshold or key "
+                "differ); pass another out path or delete the file to start again")
         acc = {f: np.array(z["acc_" + f]) for f in st.PARAM_FIELDS + st.CELL_FIELDS}
         return acc, int(z["chunks_done"])
 
@@ -93,9 +94,9 @@ def _save_state(out, acc, chunks_done, fingerprint):
     os.replace(tmp, out)  # atomic: an interruption never leaves a torn state file
 
 
-def _unit(grid, g, c, key, models, truth, cfg):
-    """Statistics (fields of ``_stats.empty`` for one cell, shape (models, ...)) of chunk
-    ``c`` of cell ``g``."""
+def _unit(grid, g, c, key, models, methods: Sequence[Method], truth, cfg):
+    """Statistics (fields of ``_stats.empty`` for one cell, shape (models x methods, ...),
+    model-major) of chunk ``c`` of cell ``g``."""
     p = grid.cell(g)
     x = simulate(p["k"], p["gamma"], p["exposure"], p["frame_interval"], cfg["n_frames"],
                  key=jr.fold_in(jr.fold_in(key, g), c), temperature=p["temperature"],
@@ -105,10 +106,11 @@ def _unit(grid, g, c, key, models, truth, cfg):
     extra = {} if cfg["gof_threshold"] is None else {"gof_threshold": cfg["gof_threshold"]}
     rows = []
     for model in models:
-        b = calibrate_batch(y, frame_interval=p["frame_interval"], exposure=p["exposure"],
-                            temperature=p["temperature"], model=model,
-                            n_blocks=cfg["n_blocks"], **extra)
-        rows.append(st.chunk_stats(b, {n: truth[n][g] for n in st.FITTED}))
+        for m in methods:
+            b = calibrate_batch(y, frame_interval=p["frame_interval"], exposure=p["exposure"],
+                                temperature=p["temperature"], model=model,
+                                n_blocks=m.blocks(p, cfg["n_frames"]), **extra)
+            rows.append(st.chunk_stats(b, {n: truth[n][g] for n in st.FITTED}))
     return {f: np.stack([r[f] for r in rows]) for f in rows[0]}
 
 
@@ -146,7 +148,8 @@ def sweep(
     n_traces: int,
     key,
     models: Sequence = ("standard",),
-    n_blocks: int = 1,
+    methods: Sequence[str] | None = None,
+    n_blocks: int | None = None,
     method: str = "exact_frames",
     chunk_traces: int | None = None,
     gof_threshold: float | None = None,
@@ -158,10 +161,11 @@ def sweep(
 
     For every cell of `grid`, `n_traces` recordings of `n_frames` frames are simulated with
     :func:`blurtrap.simulate` and calibrated with :func:`blurtrap.calibrate_batch` for each
-    model in `models`. Per cell and model the result holds, over the items with status
-    ``"ok"``: the mean of k, gamma and eps^2, the bias [%] from the true value, the SD, the
-    mean SE, SD/SE, the coverage of the 95 % Wald interval ``|x - x_true| <= 1.96 SE``, and
-    the count of items by status.
+    model in `models` and each calibration method in `methods` (every model and method fits
+    the same recordings). Per cell, model and method the result holds, over the items with
+    status ``"ok"``: the mean of k, gamma and eps^2, the bias [%] from the true value, the SD,
+    the mean SE, SD/SE, the coverage of the 95 % Wald interval ``|x - x_true| <= 1.96 SE``,
+    and the count of items by status.
 
     **Bounded memory, progress and resumption.** Trajectories are processed in chunks of
     `chunk_traces` per cell and reduced on the fly (numerically stable pairwise update of the
@@ -194,7 +198,15 @@ def sweep(
     - `key`: JAX PRNG key (keyword-only, required).
     - `models`: sequence of models for :func:`calibrate_batch` (names such as ``"naive"``,
       ``"blur"``, ``"standard"`` or TrapModels); a ``model`` axis is appended to the grid.
-    - `n_blocks`: 1 for the Whittle likelihood, > 1 for the blocked PSD (as calibrate_batch).
+    - `methods`: sequence of calibration methods (default ``("whittle",)``); a ``method``
+      axis is appended after ``model``. ``"whittle"``: the Whittle likelihood of the whole
+      record (``calibrate_batch(..., n_blocks=1)``); ``"psd"``: the blocked-PSD likelihood
+      with the default block count of ``calibrate(method="psd")`` evaluated at the cell's
+      true tau = gamma/k (``min(128, N // 64, N dt / (100 tau))`` blocks, at least 1, rounded
+      down to a power of two; the count used is the statistic ``n_blocks``); ``"psd:B"``:
+      the blocked PSD with B >= 2 blocks (at least 8 frames each) in every cell.
+    - `n_blocks`: the older way to choose one method: 1 means ``methods=("whittle",)``,
+      B > 1 ``methods=("psd:B",)``; give `methods` or `n_blocks`, not both.
     - `method`: simulation method (default ``"exact_frames"``: exact, O(1) per frame).
     - `chunk_traces`: recordings per chunk; default the largest divisor of `n_traces` <= 64.
     - `gof_threshold`: passed to :func:`calibrate_batch` (``None``: its default). Items whose
@@ -205,14 +217,15 @@ def sweep(
     - `callback`: called as ``callback(chunks_done, n_chunks)`` after each chunk (after
       `out` was written); an exception raised there stops the sweep, which can be resumed.
 
-    **Returns:** :class:`SweepResult` (``.coords``, ``.data``, ``to_dataframe()``,
-    ``to_xarray()``, ``summary()``, ``plot()``).
+    **Returns:** :class:`SweepResult` with axes the grid's, then ``model``, then ``method``
+    (``.coords``, ``.data``, ``to_dataframe()``, ``to_xarray()``, ``summary()``, ``plot()``).
     """
     g = make_grid(grid)
     n_frames = _count("n_frames", n_frames, 16)
     n_traces = _count("n_traces", n_traces)
     chunk = _chunk(n_traces, chunk_traces)
     names = _model_names(models)
+    meths = parse_methods(methods, n_blocks, n_frames)
     key = _as_key(key)
     if out is not None:
         out = os.fspath(out)
@@ -220,12 +233,12 @@ def sweep(
             raise ValueError(f"out must be a path ending in .npz; got out = {out!r}")
     n_chunks = n_traces // chunk
     n_proc, me = jax.process_count(), jax.process_index()
-    cfg = {"n_frames": n_frames, "chunk": chunk, "method": method, "n_blocks": n_blocks,
+    cfg = {"n_frames": n_frames, "chunk": chunk, "method": method,
            "gof_threshold": gof_threshold, "shard": "auto" if n_proc == 1 else False}
     fp = _fingerprint(g, n_frames=n_frames, n_traces=n_traces, chunk=chunk, models=names,
-                      n_blocks=n_blocks, method=method, gof_threshold=gof_threshold,
-                      key=np.asarray(jr.key_data(key)).tolist())
-    acc, done = _load_state(out, fp, g.n_cells, len(names))
+                      methods=[m.name for m in meths], method=method,
+                      gof_threshold=gof_threshold, key=np.asarray(jr.key_data(key)).tolist())
+    acc, done = _load_state(out, fp, g.n_cells, len(names) * len(meths))
     _check_same_start(done, n_proc)
     truth = truths(g)
     mine = list(range(me, g.n_cells, n_proc))
@@ -235,7 +248,7 @@ def sweep(
         for c in range(done, n_chunks):
             local = {f: np.zeros((n_local,) + v.shape[1:]) for f, v in acc.items()}
             for i, cell in enumerate(mine):
-                for f, v in _unit(g, cell, c, key, models, truth, cfg).items():
+                for f, v in _unit(g, cell, c, key, models, meths, truth, cfg).items():
                     local[f][i] = v
                 if bar is not None:  # the cells of this round on all processes
                     bar.update(min(n_proc, g.n_cells - i * n_proc))
@@ -248,9 +261,12 @@ def sweep(
     finally:
         if bar is not None:
             bar.close()
-    return SweepResult.from_stats(g, names, st.summarise(acc, truth), attrs={
+    data = st.summarise(acc, truth)
+    blocks = np.array([[m.blocks(g.cell(i), n_frames) for m in meths] for i in range(g.n_cells)])
+    data["n_blocks"] = np.repeat(blocks[:, None, :], len(names), axis=1).reshape(g.n_cells, -1)
+    return SweepResult.from_stats(g, names, [m.name for m in meths], data, attrs={
         "n_frames": n_frames, "n_traces": n_traces, "chunk_traces": chunk,
-        "chunks_done": done, "n_chunks": n_chunks, "method": method, "n_blocks": n_blocks,
+        "chunks_done": done, "n_chunks": n_chunks, "simulate_method": method,
         "processes": n_proc})
 
 

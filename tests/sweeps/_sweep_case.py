@@ -7,6 +7,7 @@ sweep's statistics to OUT.npz; with a process id it first joins a ``jax.distribu
 
 import os
 import sys
+from typing import Any
 
 import numpy as np
 
@@ -14,8 +15,12 @@ K, TAU = 5e-5, 0.537e-3
 DT = TAU / 2
 GRID = {"k": [K, 2 * K, 4 * K], "gamma": K * TAU, "exposure": [0.25 * DT, DT],
         "frame_interval": DT, "tracking_std": 0.5e-9}
-KW = dict(n_frames=2048, n_traces=16, chunk_traces=8, models=("naive", "standard"),
-          progress=False, gof_threshold=0.0)
+KW: dict[str, Any] = dict(n_frames=2048, n_traces=16, chunk_traces=8,
+                          models=("naive", "standard"), methods=("whittle", "psd"),
+                          progress=False, gof_threshold=0.0)
+#: the blocks of "psd" per k of GRID (calibrate's rule at the true tau = gamma/k: records of
+#: 2048 frames = 1024 TAU hold 10, 20, 40 blocks of 100 tau, rounded down to powers of two)
+PSD_BLOCKS = (8, 16, 32)
 
 
 def run(**extra):
@@ -27,7 +32,8 @@ def run(**extra):
 
 
 def save(result, path):
-    np.savez(path, **{k: np.asarray(v) for k, v in result.data.items()})
+    arrays: dict[str, Any] = {k: np.asarray(v) for k, v in result.data.items()}
+    np.savez(path, **arrays)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 """bt.sweep: statistics against a direct computation, resumption, labels and errors."""
 
+import itertools
 import json
 import sys
+from typing import Any
 
 import jax
 import jax.random as jr
@@ -11,7 +13,7 @@ import pytest
 import blurtrap as bt
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from _sweep_case import DT, GRID, KW, K, run  # noqa: E402
+from _sweep_case import DT, GRID, KW, PSD_BLOCKS, K, run  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +29,11 @@ def _same(a, b):
 
 def test_statistics_equal_a_direct_computation(full):
     """The streamed statistics equal numpy over every recording of the cell: the same keys
-    (fold_in of cell and chunk index), the same fits, mean/SD/coverage computed in one go."""
-    assert full.dims == ("k", "exposure", "model") and full.shape == (3, 2, 2)
+    (fold_in of cell and chunk index), the same fits (per method: calibrate_batch with
+    n_blocks 1 for "whittle", the hand-computed default count for "psd"), mean/SD/coverage
+    computed in one go."""
+    assert full.dims == ("k", "exposure", "model", "method") and full.shape == (3, 2, 2, 2)
+    assert list(full.coords["method"]) == ["whittle", "psd"]
     key = jr.key(11)
     for g in range(6):
         i, j = np.unravel_index(g, (3, 2))
@@ -37,24 +42,28 @@ def test_statistics_equal_a_direct_computation(full):
             k, GRID["gamma"], w, DT, 2048, key=jr.fold_in(jr.fold_in(key, g), c),
             n_traces=8, method="exact_frames", tracking_std=0.5e-9, dtype=np.float64))
             for c in range(2)])
-        for m, model in enumerate(KW["models"]):
+        for (m, model), (q, blocks) in itertools.product(
+                enumerate(KW["models"]), enumerate((1, PSD_BLOCKS[i]))):
+            at = (i, j, m, q)
+            assert full["n_blocks"][at] == blocks
             b = [bt.calibrate_batch(y[c * 8:(c + 1) * 8], frame_interval=DT, exposure=w,
-                                    model=model, gof_threshold=0.0) for c in range(2)]
+                                    model=model, n_blocks=blocks, gof_threshold=0.0)
+                 for c in range(2)]
             ok = np.concatenate([x.success for x in b])
-            assert full["n_ok"][i, j, m] == ok.sum() and full["n_items"][i, j, m] == 16
+            assert full["n_ok"][at] == ok.sum() and full["n_items"][at] == 16
             for p, true in (("k", k), ("gamma", GRID["gamma"])):
                 v = np.concatenate([getattr(x, p) for x in b])[ok]
                 e = np.concatenate([getattr(x, p + "_err") for x in b])[ok]
-                np.testing.assert_allclose(full["mean_" + p][i, j, m], v.mean(), rtol=1e-13)
-                np.testing.assert_allclose(full["sd_" + p][i, j, m], v.std(ddof=1), rtol=1e-10)
-                np.testing.assert_allclose(full["se_" + p][i, j, m], e.mean(), rtol=1e-13)
-                np.testing.assert_allclose(full["bias_" + p][i, j, m],
+                np.testing.assert_allclose(full["mean_" + p][at], v.mean(), rtol=1e-13)
+                np.testing.assert_allclose(full["sd_" + p][at], v.std(ddof=1), rtol=1e-10)
+                np.testing.assert_allclose(full["se_" + p][at], e.mean(), rtol=1e-13)
+                np.testing.assert_allclose(full["bias_" + p][at],
                                            100 * (v.mean() - true) / true, rtol=1e-10)
                 cover = np.mean(np.abs(v - true) <= 1.959963984540054 * e)
-                assert full["coverage_" + p][i, j, m] == cover
+                assert full["coverage_" + p][at] == cover
     # the naive model fits no tracking noise: no statistics for it
-    assert np.all(np.isnan(full["mean_tracking_var"][..., 0]))
-    assert np.all(np.isfinite(full["mean_tracking_var"][..., 1]))
+    assert np.all(np.isnan(full["mean_tracking_var"][..., 0, :]))
+    assert np.all(np.isfinite(full["mean_tracking_var"][..., 1, :]))
 
 
 def test_naive_model_is_biased_where_the_standard_model_is_not(full):
@@ -64,6 +73,7 @@ def test_naive_model_is_biased_where_the_standard_model_is_not(full):
     for p in ("k", "gamma"):
         z = full["bias_" + p] / (100 * full["sd_" + p] / np.sqrt(full["n_ok"])
                                  / full["true_" + p])
+        z = z[..., 0]  # the Whittle fits (the blocked PSD's naive k bias is 3.996 SEM at 1 cell)
         assert np.all(np.abs(z[..., 0]) > 4), (p, z[..., 0])
         assert np.all(np.abs(z[..., 1]) < 4), (p, z[..., 1])
 
@@ -96,31 +106,45 @@ def test_interrupted_sweep_resumes_to_the_same_result(full, tmp_path, capsys):
     _same(again, full)
     with pytest.raises(ValueError, match="different sweep"):
         run(out=out, n_frames=1024)
+    for methods in (("whittle",), ("psd", "whittle"), ("whittle", "psd:8")):
+        with pytest.raises(ValueError, match="different sweep"):  # the methods are its identity
+            run(out=out, methods=methods)
+    assert seen == [(1, 2), (2, 2)]
 
 
 def test_labels_dataframe_xarray_summary_plot(full, monkeypatch):
     assert list(full.coords["k"]) == GRID["k"] and list(full.coords["model"]) == ["naive",
                                                                                   "standard"]
     df = full.to_dataframe()
-    assert len(df) == 12 and list(df.columns[:3]) == ["k", "exposure", "model"]
-    row = df[(df.k == 2 * K) & (df.exposure == DT) & (df.model == "standard")].iloc[0]
-    assert row.bias_k == full["bias_k"][1, 1, 1]
+    assert len(df) == 24 and list(df.columns[:4]) == ["k", "exposure", "model", "method"]
+    row = df[(df.k == 2 * K) & (df.exposure == DT) & (df.model == "standard")
+             & (df.method == "psd")].iloc[0]
+    assert row.bias_k == full["bias_k"][1, 1, 1, 1] and row.n_blocks == PSD_BLOCKS[1]
+    assert row.bias_k != full["bias_k"][1, 1, 1, 0]  # the Whittle fits of the same traces
     pytest.importorskip("xarray")
     ds = full.to_xarray()
-    assert float(ds.bias_k.sel(k=2 * K, exposure=DT, model="standard")) == row.bias_k
+    # a dict: sel's keyword `method` is its own (inexact matching), not the axis
+    assert float(ds.bias_k.sel({"k": 2 * K, "exposure": DT, "model": "standard",
+                                "method": "psd"})) == row.bias_k
+    assert list(ds.method.values) == ["whittle", "psd"]
     assert ds.k.attrs["units"] == "N/m"
     monkeypatch.setitem(sys.modules, "xarray", None)
     with pytest.raises(ImportError, match="to_xarray needs xarray"):
         full.to_xarray()
     back = json.loads(json.dumps(full.to_dict()))
-    assert back["dims"] == ["k", "exposure", "model"] and back["attrs"]["n_traces"] == 16
-    assert back["data"]["bias_k"][1][1][1] == row.bias_k
+    assert back["dims"] == ["k", "exposure", "model", "method"]
+    assert back["attrs"]["n_traces"] == 16 and back["coords"]["method"] == ["whittle", "psd"]
+    assert back["data"]["bias_k"][1][1][1][1] == row.bias_k
     text = full.summary()
-    assert "k [pN/nm]" in text and "exposure [ms]" in text and "0.1 | 0.2685 | standard" in text
+    assert "k [pN/nm]" in text and "exposure [ms]" in text and "method" in text
+    assert "0.1 | 0.2685 | standard | psd | " in text
+    assert "blocks" not in text  # the block count is no failure
     fig = full.plot(x="exposure", y="bias_k")
-    assert len(fig.axes[0].lines) == 3 * 2 + 1  # k x model lines and the zero line
-    with pytest.raises(ValueError, match="x must be a numeric grid axis"):
-        full.plot(x="model")
+    assert len(fig.axes[0].lines) == 3 * 2 * 2 + 1  # k x model x method lines, the zero line
+    assert "0.1, standard, psd" in [ln.get_label() for ln in fig.axes[0].lines]
+    for x in ("model", "method"):
+        with pytest.raises(ValueError, match="x must be a numeric grid axis"):
+            full.plot(x=x)
     with pytest.raises(ValueError, match="y must be a statistic"):
         full.plot(x="k", y="bias")
 
@@ -130,12 +154,14 @@ def test_radius_and_injection_axes():
                     "injections": {"none": (), "noise": (bt.TrackingNoise(5e-9),)}},
                    n_frames=1024, n_traces=8, key=jr.key(2), models=("standard",),
                    progress=False)
-    assert res.dims == ("radius", "injections", "model")
+    assert res.dims == ("radius", "injections", "model", "method")
+    assert res.shape == (2, 2, 1, 1) and list(res.coords["method"]) == ["whittle"]
     eta = float(bt.physics.water_viscosity(295.0))
-    np.testing.assert_allclose(res["true_gamma"][:, 0, 0], 6 * np.pi * eta
+    np.testing.assert_allclose(res["true_gamma"][:, 0, 0, 0], 6 * np.pi * eta
                                * np.array([0.5e-6, 1e-6]), rtol=1e-14)
     # 5 nm of injected tracking noise shows in the fitted eps^2 (true eps^2 is 0 here)
-    assert np.all(res["mean_tracking_var"][:, 1, 0] > 10 * res["mean_tracking_var"][:, 0, 0])
+    assert np.all(res["mean_tracking_var"][:, 1, 0, 0]
+                  > 10 * res["mean_tracking_var"][:, 0, 0, 0])
 
 
 @pytest.mark.parametrize("grid, kw, match", [
@@ -162,3 +188,54 @@ def test_bad_input_is_named(grid, kw, match):
     args = {"n_frames": 64, "n_traces": 4, "key": jax.random.key(0), "progress": False, **kw}
     with pytest.raises(ValueError, match=match):
         bt.sweep(grid, **args)
+
+
+ONE_CELL = {"k": K, "gamma": K * 0.537e-3, "exposure": DT, "frame_interval": DT}
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"methods": ("whittle", "exact")}, r"unknown calibration method methods\[1\] = 'exact'; "
+     r"expected 'whittle' \(Whittle likelihood\), 'psd' .* or 'psd:B'"),
+    ({"methods": ("Whittle",)}, r"unknown calibration method methods\[0\] = 'Whittle'"),
+    ({"methods": (1,)}, r"unknown calibration method methods\[0\] = 1; expected"),
+    ({"methods": ("psd:1",)}, r"methods\[0\] = 'psd:1': the block count B of 'psd:B' must be "
+     r"an integer >= 2 \(use 'whittle' for one block\); got '1'"),
+    ({"methods": ("psd:x",)}, r"methods\[0\] = 'psd:x': .* got 'x'"),
+    ({"methods": ("psd:16",)}, r"methods\[0\] = 'psd:16' leaves 4 frames per block of "
+     r"n_frames = 64; need >= 8 \(at most 8 blocks\)"),
+    ({"methods": "whittle"}, "methods must be a non-empty sequence of calibration method names"),
+    ({"methods": ()}, "methods must be a non-empty sequence"),
+    ({"methods": ("psd", "whittle", "psd")}, r"methods must be distinct; got \['psd', 'whittle', "
+     r"'psd'\]"),
+    ({"methods": ("psd:8", "psd:08")}, "methods must be distinct"),
+    ({"methods": ("whittle",), "n_blocks": 4}, r"pass the calibration method as methods or as "
+     r"n_blocks, not both; got methods = \('whittle',\), n_blocks = 4"),
+    ({"n_blocks": 0}, r"n_blocks must be an integer >= 1 \(1: Whittle, > 1: blocked PSD\); got "
+     "n_blocks = 0"),
+    ({"n_blocks": 2.0}, "n_blocks must be an integer >= 1 .*; got n_blocks = 2.0"),
+])
+def test_bad_methods_are_named(kw, match):
+    args = {"n_frames": 64, "n_traces": 4, "key": jax.random.key(0), "progress": False, **kw}
+    with pytest.raises(ValueError, match=match):
+        bt.sweep(ONE_CELL, **args)
+
+
+def test_n_blocks_still_chooses_the_method():
+    """The older n_blocks argument: 1 is methods=("whittle",), B > 1 is ("psd:B",); the
+    numbers are those of the methods spelt out (and "psd:4" those of calibrate_batch with 4
+    blocks, which differ from Whittle's)."""
+    kw: dict[str, Any] = dict(n_frames=512, n_traces=4, key=jr.key(3), progress=False,
+                              gof_threshold=0.0)
+    old = bt.sweep(ONE_CELL, n_blocks=4, **kw)
+    new = bt.sweep(ONE_CELL, methods=("psd:4",), **kw)
+    assert list(old.coords["method"]) == ["psd:4"] and old["n_blocks"].ravel().tolist() == [4]
+    _same(old, new)
+    whittle = bt.sweep(ONE_CELL, n_blocks=1, **kw)
+    assert list(whittle.coords["method"]) == ["whittle"]
+    _same(whittle, bt.sweep(ONE_CELL, **kw))
+    y = np.asarray(bt.simulate(K, ONE_CELL["gamma"], DT, DT, 512, key=jr.fold_in(
+        jr.fold_in(jr.key(3), 0), 0), n_traces=4, method="exact_frames", dtype=np.float64))
+    b = bt.calibrate_batch(y.reshape(4, 512), frame_interval=DT, exposure=DT, n_blocks=4,
+                           model="standard", gof_threshold=0.0)
+    np.testing.assert_allclose(old["mean_k"].ravel(), b.k[b.success].mean(), rtol=1e-13)
+    assert old["mean_k"].ravel()[0] != whittle["mean_k"].ravel()[0]
