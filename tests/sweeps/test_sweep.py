@@ -30,10 +30,10 @@ def _same(a, b):
 def test_statistics_equal_a_direct_computation(full):
     """The streamed statistics equal numpy over every recording of the cell: the same keys
     (fold_in of cell and chunk index), the same fits (per method: calibrate_batch with
-    n_blocks 1 for "whittle", the hand-computed default count for "psd"), mean/SD/coverage
+    n_blocks 1 for "whittle", 16 for "psd:16"), mean/SD/coverage
     computed in one go."""
     assert full.dims == ("k", "exposure", "model", "method") and full.shape == (3, 2, 2, 2)
-    assert list(full.coords["method"]) == ["whittle", "psd"]
+    assert list(full.coords["method"]) == ["whittle", "psd:16"]
     key = jr.key(11)
     for g in range(6):
         i, j = np.unravel_index(g, (3, 2))
@@ -118,30 +118,30 @@ def test_labels_dataframe_xarray_summary_plot(full, monkeypatch):
     df = full.to_dataframe()
     assert len(df) == 24 and list(df.columns[:4]) == ["k", "exposure", "model", "method"]
     row = df[(df.k == 2 * K) & (df.exposure == DT) & (df.model == "standard")
-             & (df.method == "psd")].iloc[0]
+             & (df.method == "psd:16")].iloc[0]
     assert row.bias_k == full["bias_k"][1, 1, 1, 1] and row.n_blocks == PSD_BLOCKS[1]
     assert row.bias_k != full["bias_k"][1, 1, 1, 0]  # the Whittle fits of the same traces
     pytest.importorskip("xarray")
     ds = full.to_xarray()
     # a dict: sel's keyword `method` is its own (inexact matching), not the axis
     assert float(ds.bias_k.sel({"k": 2 * K, "exposure": DT, "model": "standard",
-                                "method": "psd"})) == row.bias_k
-    assert list(ds.method.values) == ["whittle", "psd"]
+                                "method": "psd:16"})) == row.bias_k
+    assert list(ds.method.values) == ["whittle", "psd:16"]
     assert ds.k.attrs["units"] == "N/m"
     monkeypatch.setitem(sys.modules, "xarray", None)
     with pytest.raises(ImportError, match="to_xarray needs xarray"):
         full.to_xarray()
     back = json.loads(json.dumps(full.to_dict()))
     assert back["dims"] == ["k", "exposure", "model", "method"]
-    assert back["attrs"]["n_traces"] == 16 and back["coords"]["method"] == ["whittle", "psd"]
+    assert back["attrs"]["n_traces"] == 16 and back["coords"]["method"] == ["whittle", "psd:16"]
     assert back["data"]["bias_k"][1][1][1][1] == row.bias_k
     text = full.summary()
     assert "k [pN/nm]" in text and "exposure [ms]" in text and "method" in text
-    assert "0.1 | 0.2685 | standard | psd | " in text
+    assert "0.1 | 0.2685 | standard | psd:16 | " in text
     assert "blocks" not in text  # the block count is no failure
     fig = full.plot(x="exposure", y="bias_k")
     assert len(fig.axes[0].lines) == 3 * 2 * 2 + 1  # k x model x method lines, the zero line
-    assert "0.1, standard, psd" in [ln.get_label() for ln in fig.axes[0].lines]
+    assert "0.1, standard, psd:16" in [ln.get_label() for ln in fig.axes[0].lines]
     for x in ("model", "method"):
         with pytest.raises(ValueError, match="x must be a numeric grid axis"):
             full.plot(x=x)
@@ -239,3 +239,25 @@ def test_n_blocks_still_chooses_the_method():
                            model="standard", gof_threshold=0.0)
     np.testing.assert_allclose(old["mean_k"].ravel(), b.k[b.success].mean(), rtol=1e-13)
     assert old["mean_k"].ravel()[0] != whittle["mean_k"].ravel()[0]
+
+
+def test_psd_uses_calibrates_default_block_count_per_cell():
+    """"psd" picks, per cell, the block count calibrate(method="psd") uses at the cell's true
+    tau: min(128, N // 64, N dt / (100 tau)) rounded down to a power of two. Hand-computed for
+    2048-frame records at dt = tau / 2 (1024 tau: 10, 20, 40 blocks of 100 tau -> 8, 16, 32)
+    and 512 frames (the N // 64 = 8 cap), and the sweep's statistic for one cell."""
+    from blurtrap.sweeps._methods import default_blocks
+
+    tau = 0.537e-3
+    assert [default_blocks(2048, tau / 2, tau * f) for f in (1, 0.5, 0.25)] == [8, 16, 32]
+    assert default_blocks(512, tau / 2, tau / 4) == 8
+    assert default_blocks(256, tau / 2, tau * 20) == 1  # too short for 2 blocks: Whittle
+    res = bt.sweep(ONE_CELL, n_frames=512, n_traces=4, key=jr.key(3), methods=("psd",),
+                   progress=False, gof_threshold=0.0)
+    expected = default_blocks(512, DT, ONE_CELL["gamma"] / ONE_CELL["k"])
+    assert res["n_blocks"].ravel().tolist() == [expected]
+    rec = bt.Recording(np.asarray(bt.simulate(K, ONE_CELL["gamma"], DT, DT, 512,
+                                              key=jr.key(4), dtype=np.float64)).ravel(),
+                       frame_interval=DT, exposure=DT)
+    notes = " ".join(bt.calibrate(rec, method="psd").notes)  # tau estimated there: same count
+    assert f"psd: {expected} blocks" in notes, notes
