@@ -321,8 +321,10 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
       (log k_i, log gamma, log eps^2), log k_i = log c + log p_i, so its ``predicted_se["k"]``
       is the relative SE of c, equal to that of k at the power `k` is given at. That is what
       ``bt.calibrate(recordings, k="linear_power")`` fits (each recording's ``laser_power``
-      set); ``k="per_power"`` fits one k per power, each with a larger SE. A candidate's
-      ``laser_powers`` lists the power of each recording.
+      set); ``k="per_power"`` fits one k per power, each with a larger SE. The best single
+      power's SE of k is that of k at its power, carried to the reference power by k = c P
+      (it trusts the proportionality; a series tests it). A candidate's ``laser_powers``
+      lists the power of each recording.
 
     **Returns:** :class:`DesignResult` (``best``, ``predicted_se``, ``summary()``,
     ``to_dict()``).
