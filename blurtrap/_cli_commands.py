@@ -294,7 +294,7 @@ def design_command(args) -> int:
                  photon_limited=args.photon_limited, target=args.target,
                  friction_error=(None if args.friction_error is None
                                  else args.friction_error / 100.0),
-                 series=tuple(args.series))
+                 series=tuple(args.series), laser_powers=args.powers)
     if args.plot:
         import matplotlib
 

@@ -201,6 +201,17 @@ def _add_diagnose_parser(sub):
     _add_debug(g)
 
 
+def _power_list(text: str) -> tuple:
+    """argparse type of ``design --powers``: comma-separated numbers (checked further by
+    ``design``: at least 2 distinct, all > 0)."""
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be comma-separated numbers (multiples of the power --k is at), e.g. "
+            f"0.5,1,2; got {text!r}") from None
+
+
 def _add_design_parser(sub):
     d = sub.add_parser(
         "design", help="recommend frame rate, exposures and record length (Fisher information)",
@@ -241,6 +252,10 @@ def _add_design_parser(sub):
     d.add_argument("--series", type=int, nargs="+", default=(1, 2, 3), metavar="N",
                    help="numbers of exposures to try at a common frame interval (default "
                    "1 2 3; 1 = one recording)")
+    d.add_argument("--powers", type=_power_list, default=None, metavar="P1,P2,...",
+                   help="available laser powers as multiples of the power --k is at, e.g. "
+                   "0.5,1,2 (k = c P): adds power series and the best single power to the "
+                   "candidates (fit such a series with calibrate --k-mode linear_power)")
     d.add_argument("--plot", metavar="PNG", default=None,
                    help="also write the predicted-SE figure to this PNG file")
     d.add_argument("--json", action="store_true", help="print one JSON object (SI units)")

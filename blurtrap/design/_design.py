@@ -6,7 +6,10 @@ with photon-limited noise eps^2 = eps_ref^2 W_ref / W, still one shared paramete
 continuous choices (dt, W, and the exposures of a series) are optimised by gradients
 (optimistix BFGS on unconstrained coordinates, several starts); the discrete ones (a single
 recording, an exposure series of 2 or 3 exposures, the user's current design, W = dt at the
-fastest frame rate, the paper's series) are compared on the same objective.
+fastest frame rate, the paper's series) are compared on the same objective. With the available
+laser powers given, power series are candidates too: recording i at p_i times the power k is
+given at has k_i = k p_i (k = c P), so its information in (log c, ...) is its own in
+(log k_i, ...), summed over the series like an exposure series'.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import optimistix as optx
 from .._config import float64_scope
 from ..physics import BOLTZMANN, water_viscosity
 from ._fisher import whittle_information
+from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
 
 TARGETS = ("k", "gamma", "both", "determinant", "force_sensitivity")
@@ -36,15 +40,18 @@ PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
 
 def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise):
     """Whittle information (n_k, n_par, n_par) of the recordings ``recs`` ((dt, W, N) each;
-    shared k, gamma, eps^2) per stiffness in ``ks``, in (log k, log gamma[, log eps^2])."""
+    shared k, gamma, eps^2) per stiffness in ``ks``, in (log k, log gamma[, log eps^2]).
+    A recording ``(dt, W, N, p)`` is at ``p`` times the laser power at which k is given:
+    k_i = k p (k = c P), and log k_i = log c + log p, so the first row is that of log c."""
     dts, ws, ns = (jnp.stack([jnp.asarray(r[i], dtype=float) for r in recs]) for i in range(3))
+    ps = jnp.stack([jnp.asarray(r[3] if len(r) > 3 else 1.0, dtype=float) for r in recs])
 
     def info(k):
-        def one(dt, w, n):
+        def one(dt, w, n, p):
             e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
-            return whittle_information(k, gamma, w, dt, n, temperature, e2, noise=noise)
+            return whittle_information(k * p, gamma, w, dt, n, temperature, e2, noise=noise)
 
-        return jnp.sum(jax.vmap(one)(dts, ws, ns), axis=0)
+        return jnp.sum(jax.vmap(one)(dts, ws, ns, ps), axis=0)
 
     return jax.vmap(info)(jnp.asarray(ks))
 
@@ -144,7 +151,8 @@ def _objective(infos, target, friction_se):
 
 
 class _Problem(eqx.Module):
-    """`n_exp` recordings at a common frame interval, as a function of unconstrained
+    """`n_exp` recordings at a common frame interval (at the relative laser powers
+    ``powers``), as a function of unconstrained
     coordinates ``u = (log(dt/dt_min - 1), logit of each exposure in [w_min, dt - dead])``."""
 
     dt_min: jax.Array
@@ -157,6 +165,7 @@ class _Problem(eqx.Module):
     eps_ref2: jax.Array
     w_ref: jax.Array
     friction_se: jax.Array  # < 0: friction fitted; >= 0: known to this relative SE
+    powers: jax.Array  # (n_exp,) laser power of each recording / the power k is given at
     n_exp: int = eqx.field(static=True)
     total_time: bool = eqx.field(static=True)
     photon_limited: bool = eqx.field(static=True)
@@ -168,7 +177,7 @@ class _Problem(eqx.Module):
         dt = self.dt_min * (1.0 + jnp.exp(u[0]))
         ws = self.w_min + jax.nn.sigmoid(u[1:]) * (dt - self.dead - self.w_min)
         n = self.budget / dt / self.n_exp if self.total_time else self.budget
-        return [(dt, ws[i], n) for i in range(self.n_exp)]
+        return [(dt, ws[i], n, self.powers[i]) for i in range(self.n_exp)]
 
 
 def _log_objective(u, prob: _Problem):
@@ -210,7 +219,10 @@ _evaluate_jit = jax.jit(_evaluate, static_argnames=("photon_limited", "noise", "
 
 def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
                  target, friction_se=-1.0):
-    recs = tuple((float(dt), float(w), float(n)) for dt, w, n in recs)
+    """The candidate ``recs``: (dt, W, N) each, or (dt, W, N, p) each for recordings at laser
+    powers p times the one k is given at (a power series; k_i = k p, SE of k = SE of c)."""
+    recs = tuple(tuple(float(x) for x in r) for r in recs)
+    powers = tuple(r[3] for r in recs) if recs and all(len(r) == 4 for r in recs) else None
     se, free_se, fs, obj, crb, p_bound = _evaluate_jit(
         recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se,
         photon_limited=photon_limited, noise=eps_ref2 > 0, target=target)
@@ -236,8 +248,8 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
     unconstrained = {n: crb[:, i] for i, n in enumerate(names) if n in predicted}
     if friction_se == 0:
         unconstrained["gamma"] = np.zeros_like(crb[:, 1])
-    return Acquisition(label, recs, predicted, obj, unconstrained_se=unconstrained,
-                       bound_probability=np.asarray(p_bound))
+    return Acquisition(label, tuple(r[:3] for r in recs), predicted, obj, powers,
+                       unconstrained_se=unconstrained, bound_probability=np.asarray(p_bound))
 
 
 def _check(name, value, lo=0.0, unit=""):
@@ -278,9 +290,12 @@ def _checked_noise(tracking_std, photon_limited) -> float:
 
 
 def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time: float,
-               budget: float, by_time: bool) -> Acquisition | None:
+               budget: float, by_time: bool, powers=None,
+               label: str | None = None) -> Acquisition | None:
     """The best series of ``n_exp`` exposures at a common frame interval, from a few starts
-    (None when no start gives a finite objective)."""
+    (None when no start gives a finite objective). ``powers``: one laser power per recording
+    (relative to the one k is given at; a power series with one exposure per power); the
+    program compiled is the same as the exposure series' (there: powers 1)."""
     ks, gamma, temperature, eps_ref2, w_ref, photon_limited, target, friction_se = common
     prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
                     dead=jnp.asarray(dead_time),
@@ -288,6 +303,8 @@ def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time
                     ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
                     temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
                     w_ref=jnp.asarray(w_ref), friction_se=jnp.asarray(friction_se),
+                    powers=jnp.asarray(np.ones(n_exp) if powers is None else powers,
+                                       dtype=float),
                     n_exp=n_exp,
                     total_time=by_time, photon_limited=photon_limited,
                     target=target, noise=eps_ref2 > 0)
@@ -299,9 +316,11 @@ def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time
     if not np.isfinite(vals).any():
         return None
     best_u = us[int(np.argmin(vals))]
-    label = "optimised single recording" if n_exp == 1 else \
-        f"optimised series of {n_exp} exposures"
-    return _acquisition(label, prob.recs(best_u), *common)
+    if label is None:
+        label = "optimised single recording" if n_exp == 1 else \
+            f"optimised series of {n_exp} exposures"
+    recs = prob.recs(best_u)
+    return _acquisition(label, recs if powers is not None else [r[:3] for r in recs], *common)
 
 
 @float64_scope
@@ -311,7 +330,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
            tracking_std: float = 0.0, photon_limited: bool = False,
            reference_exposure: float | None = None, target: str = "k",
            friction_error: float | None = None, current=None,
-           series=(1, 2, 3)) -> DesignResult:
+           series=(1, 2, 3), laser_powers=None) -> DesignResult:
     """Recommend an acquisition that minimises the expected error of the calibration.
 
     The expected errors are the Cramer-Rao bound of the Whittle Fisher information, corrected
@@ -340,13 +359,28 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
       ``fixed={"gamma": ...}``. This is what makes dt >> tau usable: there one recording
       cannot separate k from gamma, but with gamma known only k (and eps^2) must be
       identified. ``predicted_se`` then also has ``"force_sensitivity"``.
-    - `current`: the user's design, ``[(frame_interval, exposure, n_frames), ...]``.
+    - `current`: the user's design, ``[(frame_interval, exposure, n_frames), ...]`` (a
+      fourth number per recording: its laser power, as a multiple of the one `k` is at).
     - `series`: numbers of exposures to try at a common frame interval (1 = single recording).
+    - `laser_powers`: the available laser powers as multiples of the power at which `k` is
+      given, e.g. ``(0.5, 1, 2)`` (k_i = k p_i: k = c P, paper section 6.3; gamma and eps^2
+      shared). Adds three candidates: a power series at W = dt (every power, the budget split
+      equally), a power series with each power's exposure and the common frame interval
+      optimised by gradients, and the best single power (exposure and frame interval
+      optimised). A power series' information is the sum of its recordings' in
+      (log k_i, log gamma, log eps^2), log k_i = log c + log p_i, so its ``predicted_se["k"]``
+      is the relative SE of c, equal to that of k at the power `k` is given at. That is what
+      ``bt.calibrate(recordings, k="linear_power")`` fits (each recording's ``laser_power``
+      set); ``k="per_power"`` fits one k per power, each with a larger SE. The best single
+      power's SE of k is that of k at its power, carried to the reference power by k = c P
+      (it trusts the proportionality; a series tests it). A candidate's ``laser_powers``
+      lists the power of each recording.
 
     **Returns:** :class:`DesignResult` (``best``, ``predicted_se``, ``summary()``,
     ``to_dict()``).
     """
     friction_se = _checked_friction(target, friction_error)
+    powers = checked_powers(laser_powers)
     ks = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
     if len(ks) == 2:
         ks = tuple(np.geomspace(ks[0], ks[1], 3))
@@ -386,10 +420,13 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
                            for f in PAPER_SERIES], *common)]
     if current is not None:
         cur = [tuple(float(x) for x in r) for r in current]
-        for dt, w, n in cur:
-            if not (0 < w <= dt):
-                raise ValueError(f"current: each recording needs 0 < exposure <= frame "
-                                 f"interval; got ({dt}, {w}, {n})")
+        for r in cur:
+            if len(r) not in (3, 4) or not (0 < r[1] <= r[0]) or (len(r) == 4 and not r[3] > 0):
+                raise ValueError(f"current: each recording needs (frame interval, exposure, "
+                                 f"frames[, laser power > 0]) with 0 < exposure <= frame "
+                                 f"interval; got {r}")
+        if len({len(r) for r in cur}) > 1:
+            raise ValueError("current: give a laser power for every recording or for none")
         cands.append(_acquisition("your current design", cur, *common))
     budget = total_time if total_time is not None else n_frames
     assert budget is not None  # exactly one of n_frames / total_time is given (checked above)
@@ -400,6 +437,9 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
                           total_time is not None)
         if best is not None:
             cands.append(best)
+    if powers is not None:
+        cands += power_candidates(powers, common, dt_min, w_min, float(dead_time),
+                                   float(budget), total_time is not None)
     cands.sort(key=lambda c: c.objective)  # unidentified designs (objective inf) last
     if not math.isfinite(cands[0].objective):
         what = "both k and gamma" if friction_se < 0 or target == "force_sensitivity" else "k"
@@ -413,6 +453,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
                 "total_time_s": total_time, "tracking_std_m": tracking_std,
                 "photon_limited": bool(photon_limited), "reference_exposure_s": w_ref,
                 "friction_error": friction_error,
+                "laser_powers": None if powers is None else list(powers),
                 "kT_J": BOLTZMANN * temperature}
     return DesignResult(best=cands[0], candidates=tuple(cands), target=target, k=ks,
                         settings=settings)

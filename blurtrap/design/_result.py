@@ -10,7 +10,9 @@ import numpy as np
 @dataclasses.dataclass(frozen=True)
 class Acquisition:
     """One candidate: recordings as (frame_interval [s], exposure [s], n_frames), the predicted
-    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective.
+    relative SEs of k, gamma, eps^2 at each stiffness of the range, and the objective. A power
+    series also has ``laser_powers``: each recording's laser power as a multiple of the one k
+    is given at (its ``predicted_se["k"]`` is then that of c in k = c P).
 
     ``predicted_se`` is the expected scatter of the fit's estimates with eps^2 >= 0 enforced
     (below the Cramer-Rao bound where eps^2 often lands on its bound 0, see
@@ -22,13 +24,17 @@ class Acquisition:
     recordings: tuple
     predicted_se: dict  # name -> relative SE (fraction) at each k of the range
     objective: float
+    laser_powers: tuple | None = None
     unconstrained_se: dict = dataclasses.field(default_factory=dict)
     bound_probability: np.ndarray | None = None
 
     def to_dict(self) -> dict:
+        recs = [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
+                for r in self.recordings]
+        for rec, p in zip(recs, self.laser_powers or ()):
+            rec["laser_power_relative"] = p
         return {"label": self.label, "objective": self.objective,
-                "recordings": [{"frame_interval_s": r[0], "exposure_s": r[1], "n_frames": r[2]}
-                               for r in self.recordings],
+                "recordings": recs,
                 "predicted_relative_se": {n: [float(x) for x in v]
                                           for n, v in self.predicted_se.items()},
                 "cramer_rao_relative_se": {n: [float(x) for x in v]
@@ -69,20 +75,25 @@ class DesignResult:
         extra = self.target not in ("k", "gamma")
         lines = [f"experiment design: minimise the SE of {self.target} (worst case over k = "
                  + ", ".join(f"{k * 1e3:.3g}" for k in self.k) + " pN/nm)",
-                 f"  {'candidate':<34s} {'recordings (dt ms / W ms / frames)':<44s}"
+                 f"  {'candidate':<34s} {'recordings (dt ms / W ms / frames [@ P])':<44s}"
                  f" {'SE k %':>8s} {'SE gamma %':>11s}"
                  + (f" {'SE ' + self.target + ' %':>12s}" if extra else "")]
         for c in self.candidates:
+            ps = c.laser_powers or (None,) * len(c.recordings)
             recs = "; ".join(f"{r[0] * 1e3:.3g}/{r[1] * 1e3:.3g}/{int(r[2])}"
-                             for r in c.recordings)
+                             + ("" if p is None else f"@{p:g}P")
+                             for r, p in zip(c.recordings, ps))
+            full = recs if len(recs) > 44 and c.laser_powers else ""
             if len(recs) > 44:
                 recs = recs[:41] + "..."
             mark = "*" if c is self.best else " "
             sg = np.max(c.predicted_se["gamma"])
             lines.append(f"{mark} {c.label:<34s} {recs:<44s} "
                          f"{100 * np.max(c.predicted_se['k']):8.3g} "
-                         + (f"{100 * sg:11.3g}" if sg > 0 else f"{'known':>11s}")
+                         + (f"{100 * sg:11.3g}" if sg != 0 else f"{'known':>11s}")
                          + (f" {100 * c.objective:12.3g}" if extra else ""))
+            if full:  # a power series: every recording with its power, on its own line
+                lines.append(f"      {full}")
         p_bound = float(np.max(self.best.bound_probability)) \
             if self.best.bound_probability is not None else 0.0
         if p_bound > 0.01:
@@ -97,5 +108,8 @@ class DesignResult:
                      "eps^2 >= 0, relative, worst over the k range"
                      + ("" if known is None else
                         f"; friction known to {100 * known:.3g} % (SE gamma is that prior)")
+                     + ("" if self.settings.get("laser_powers") is None else
+                        "; @pP: at p times the laser power k is given at, SE k of a power "
+                        "series = SE of c in k = c P, calibrate(k='linear_power')")
                      + ")")
         return "\n".join(lines)
