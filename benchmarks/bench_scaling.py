@@ -20,8 +20,10 @@ B. Batch size 1 .. 10^4: ``calibrate_batch`` on B records of 4096 frames (B = 1,
    (Whittle) objective; first call (compile) separately; peak RSS.
 C. Simulator throughput with 1 and 2 XLA host devices (``--xla_force_host_platform_device_count``,
    fresh subprocesses; ``simulate`` shards the traces axis over local devices).
-D. ``--gpu``: on whatever accelerator JAX sees, simulator substeps/s at N >= 1e6 traces and
-   ``calibrate_batch`` throughput; written to ``RESULTS_scaling_gpu.md``.
+D. ``--gpu``: on whatever accelerator JAX sees, simulator substeps/s and frames/s at N >= 1e6
+   traces, ``calibrate_batch`` throughput, and a ``sweep`` of 2^20 trajectories (fits/s),
+   each with its ratio to a plain numpy / scipy reference measured on the host CPU in the same
+   run; written to ``RESULTS_scaling_gpu.md``.
 
 Writes ``RESULTS_scaling.md`` and ``scaling.png`` into ``--out`` (``--gpu`` writes only the
 GPU file).
@@ -221,14 +223,53 @@ def part_c():
 
 
 # ------------------------------------------------------------------------------------------
+def _cpu_references(scale):
+    """Plain numpy / scipy throughput on the host CPU, for the accelerator's ratios: the exact
+    OU substep simulator of bench_simulate in numpy (substeps/s), an AR(1) recursion with one
+    normal draw per frame in numpy (frames/s; a lower bound on the work of the exact frame
+    law, which draws two), and the Whittle fit in numpy + scipy L-BFGS-B of bench_calibration
+    (records/s, looping over records)."""
+    from bench_calibration import scipy_whittle_fit
+    from bench_simulate import numpy_reference
+
+    out = {}
+    n_ref = max(2, min(2**14, int(2**20 * scale)))
+    t = tmin(lambda: numpy_reference(n_ref, 16, 100, np.float32), 2)[0]
+    out["numpy substeps"] = (n_ref * 16 * 101 / t, "substeps/s")
+    rng = np.random.default_rng(0)
+
+    def frames():  # AR(1), one normal per frame and trajectory
+        x = rng.standard_normal(n_ref).astype(np.float32)
+        y = np.empty((256, n_ref), np.float32)
+        c = np.float32(math.exp(-DT * K / GAMMA))
+        s = np.float32(math.sqrt(1 - c * c))
+        for i in range(256):
+            x = c * x + s * rng.standard_normal(n_ref).astype(np.float32)
+            y[i] = x
+        return y
+
+    t = tmin(frames, 2)[0]
+    out["numpy exact frames"] = (n_ref * 256 / t, "frames/s")
+    for n in (4096, 65536):
+        y = sim(n, 3, seed=4)
+        t = tmin(lambda y=y: [scipy_whittle_fit(r, np.array([K, GAMMA, EPS**2])) for r in y],
+                 2)[0]
+        out[f"scipy Whittle fits, {n} frames"] = (3 / t, "records/s")
+    return out
+
+
 def part_gpu(scale, out_dir, mach):
     """Accelerator section: simulator substeps/s at N >= 1e6 traces, batched calibration."""
     dev = jax.devices()[0]
     L = ["# GPU / accelerator section\n", f"{machine_line(mach)}; device {dev} "
          f"({getattr(dev, 'device_kind', '')}); scale {scale}.\n"]
     n_tr = max(2, int(2**20 * scale))
-    L.append("| what | size | wall [s] (min of 3, after compile) | throughput | compile [s] |")
-    L.append("|---|---|---|---|---|")
+    ref = _cpu_references(scale)
+    L.append("CPU references, measured in this run on the host's CPU: "
+             + "; ".join(f"{k} {v[0]:.3g} {v[1]}" for k, v in ref.items()) + ".\n")
+    L.append("| what | size | wall [s] (min of 3, after compile) | throughput | compile [s] "
+             "| ratio to the CPU reference |")
+    L.append("|---|---|---|---|---|---|")
     for name, kw, nf, per_frame, unit in (
             ("simulate, exact substeps (100/exposure + dead step)",
              dict(method="exact", substeps=100, dtype=np.float32), 16, 101, "substeps/s"),
@@ -242,8 +283,9 @@ def part_gpu(scale, out_dir, mach):
         first = time.perf_counter() - t0
         t = tmin(lambda call=call: call(1), 3)[0]
         work = n_tr * nf * per_frame
+        base = ref["numpy substeps"][0] if per_frame > 1 else ref["numpy exact frames"][0]
         L.append(f"| {name}, float32 | {n_tr} traces x {nf} frames | {t:.3f} | "
-                 f"{work / t:.3g} {unit} | {first - t:.1f} |")
+                 f"{work / t:.3g} {unit} | {first - t:.1f} | {work / t / base:.3g} |")
         print(L[-1], flush=True)
     for n, b in ((4096, max(2, int(10**4 * scale))), (65536, max(2, int(10**3 * scale)))):
         y = sim(n, b, seed=3)
@@ -251,9 +293,29 @@ def part_gpu(scale, out_dir, mach):
         bt.calibrate_batch(y, frame_interval=DT, exposure=W)
         first = time.perf_counter() - t0
         t = tmin(lambda y=y: bt.calibrate_batch(y, frame_interval=DT, exposure=W), 3)[0]
+        base = ref[f"scipy Whittle fits, {n} frames"][0]
         L.append(f"| calibrate_batch (Whittle), float64 | {b} x {n} frames | {t:.3f} | "
-                 f"{b / t:.3g} records/s | {first - t:.1f} |")
+                 f"{b / t:.3g} records/s | {first - t:.1f} | {b / t / base:.3g} |")
         print(L[-1], flush=True)
+    # a million-trajectory sweep: simulate + calibrate streamed in chunks (one grid cell)
+    n_sw, chunk = max(64, int(2**20 * scale)), max(64, min(2**14, int(2**20 * scale)))
+    n_sw -= n_sw % chunk
+    t0 = time.perf_counter()
+    bt.sweep({"k": K, "gamma": GAMMA, "exposure": W, "frame_interval": DT, "tracking_std": EPS},
+             n_frames=1024, n_traces=chunk, chunk_traces=chunk, key=jax.random.key(5),
+             progress=False)
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    bt.sweep({"k": K, "gamma": GAMMA, "exposure": W, "frame_interval": DT, "tracking_std": EPS},
+             n_frames=1024, n_traces=n_sw, chunk_traces=chunk, key=jax.random.key(6),
+             progress=False)
+    t = time.perf_counter() - t0
+    base = ref["scipy Whittle fits, 4096 frames"][0]
+    L.append(f"| sweep (simulate + calibrate_batch, streamed), float64 | {n_sw} traces x 1024 "
+             f"frames, chunks of {chunk} | {t:.3f} | {n_sw / t:.3g} fits/s, "
+             f"{n_sw * 1024 / t:.3g} frames/s | {first:.1f} (first chunk) | "
+             f"{n_sw / t / base:.3g} (vs scipy fits of 4096 frames) |")
+    print(L[-1], flush=True)
     path = out_dir / "RESULTS_scaling_gpu.md"
     path.write_text("\n".join(L) + "\n")
     print(f"wrote {path}")
