@@ -204,7 +204,7 @@ def _wall_recording(x, stage, f_d, distance, radius=R, radius_err=None):
 
 
 def _wall_traces(n_seeds, h_over_r, f_d, seed0):
-    from _wall_gen import generate_wall_driven
+    from _wall_gen import generate_wall_driven  # pyright: ignore[reportMissingImports]
 
     return [generate_wall_driven(N, FS, K, R, seed0 + s, amplitude=200e-9, frequency=f_d,
                                  distance=h_over_r * R, eta=ETA, rho_f=RHO, rho_b=RB,
@@ -212,7 +212,7 @@ def _wall_traces(n_seeds, h_over_r, f_d, seed0):
 
 
 def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000):
-    from _wall_gen import zero_frequency_friction
+    from _wall_gen import zero_frequency_friction  # pyright: ignore[reportMissingImports]
 
     import blurtrap as bt
 
@@ -266,6 +266,8 @@ def main_radius(n_radii=12, h_over_r=1.6, f_d=32.0, seed0=3000):
         out[n] = dict(propagated_pct=part * rel, mc_sd_pct=sd * rel,
                       mc_sd_se_pct=sd * rel / math.sqrt(2 * (n_radii - 1)),
                       slope_ratio=float(np.polyfit(radii, vals[:, i], 1)[0] * s**2 / cov[i, ir]))
+    # linear in R: the MC SD is the propagated part times the draws' own SD / s
+    out["radii_sd_over_s"] = float(np.std(radii, ddof=1) / s)
     print(json.dumps(out, indent=1), f"{time.time() - t0:.0f} s", flush=True)
     return out
 
