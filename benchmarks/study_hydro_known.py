@@ -22,6 +22,24 @@ drive not: Rd x |H_Lorentz(f_c)|/|H_D3(f_c)|, gamma and k / that ratio squared, 
 
     nice python benchmarks/study_hydro_known.py active [N_SEEDS [TRACKING_STD_M [F_DRIVE [SEED0]]]]
     (defaults 50, 0.5e-9, 32 and 2000: seeds SEED0 ... SEED0 + N_SEEDS - 1)
+
+Near a surface (``active_wall``): the same bead, trap, photodiode and drive (0.5 nm tracking
+noise), the bead's centre H_OVER_R radii from the surface; traces from tests/_wall_gen.py
+(numpy: TN 2006 eq. D2 with the near-wall friction of eq. D6 by spectral synthesis, the drive's
+response of eq. D3 with the same friction). blurtrap in volts, friction free, with the distance
+given (``distance_to_surface_m``), without it (bulk friction) and with ``hydrodynamics=False``;
+truth for gamma: the zero-frequency friction of eq. D6, ``6 pi eta R/(1 - 9R/16h)``.
+
+    nice python benchmarks/study_hydro_known.py active_wall [N_SEEDS [H_OVER_R [F_DRIVE [SEED0]]]]
+    (defaults 30, 1.6, 32 and 3000)
+
+The radius's error (``radius``): one near-wall trace (seed SEED0, H_OVER_R, F_DRIVE as above)
+calibrated with the bead radius drawn N_RADII times from N(R, (3 % R)^2) (no error given):
+the SD of the results against the radius's part of each error that one fit with
+``bead_radius_err_m = 3 % R`` propagates (blurtrap/inference/_radius_error.py).
+
+    nice python benchmarks/study_hydro_known.py radius [N_RADII [H_OVER_R [F_DRIVE [SEED0]]]]
+    (defaults 12, 1.6, 32 and 3000)
 """
 
 from __future__ import annotations
@@ -169,8 +187,99 @@ def main_active(n_seeds=50, eps=EPS, f_d=32.0, seed0=2000):
     return fits
 
 
+_WALL_OUT = ("displacement_sensitivity", "gamma", "k", "force_sensitivity")
+
+
+def _wall_recording(x, stage, f_d, distance, radius=R, radius_err=None):
+    import blurtrap as bt
+
+    meta = dict(detector="photodiode", anti_aliasing=True, bead_radius_m=radius,
+                viscosity_Pa_s=ETA, fluid_density_kg_per_m3=RHO, drive={"frequency_Hz": f_d})
+    if distance is not None:
+        meta["distance_to_surface_m"] = distance
+    if radius_err is not None:
+        meta["bead_radius_err_m"] = radius_err
+    return bt.Recording(positions=x / RD, frame_interval=1 / FS, exposure=1 / FS,
+                        temperature=T, stage=stage, position_unit="V", metadata=meta)
+
+
+def _wall_traces(n_seeds, h_over_r, f_d, seed0):
+    from _wall_gen import generate_wall_driven  # pyright: ignore[reportMissingImports]
+
+    return [generate_wall_driven(N, FS, K, R, seed0 + s, amplitude=200e-9, frequency=f_d,
+                                 distance=h_over_r * R, eta=ETA, rho_f=RHO, rho_b=RB,
+                                 tracking_std=EPS, stage_noise=1e-9) for s in range(n_seeds)]
+
+
+def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000):
+    from _wall_gen import zero_frequency_friction  # pyright: ignore[reportMissingImports]
+
+    import blurtrap as bt
+
+    f_d = round(f_d * N / FS) * FS / N
+    h = h_over_r * R
+    truth = dict(zip(_WALL_OUT, (RD, zero_frequency_friction(R, ETA, h), K, K * RD)))
+    cases = {"distance given": (h, None), "distance not given (bulk)": (None, None),
+             "hydrodynamics=False": (h, False)}
+    rows = {c: {n: ([], []) for n in _WALL_OUT} for c in cases}
+    t0 = time.time()
+    for x, stage in _wall_traces(n_seeds, h_over_r, f_d, seed0):
+        for case, (dist, hd) in cases.items():
+            r = bt.calibrate(_wall_recording(x, stage, f_d, dist), hydrodynamics=hd)
+            err = np.sqrt(np.diag(r.covariance))
+            for n in _WALL_OUT:
+                i = r.param_names.index(n)
+                rows[case][n][0].append(r.values[i])
+                rows[case][n][1].append(err[i])
+    fits = {f"blurtrap {c}": {n.replace("displacement_sensitivity", "Rd").replace(
+        "force_sensitivity", "Rf"): _row(*rows[c][n], truth[n]) for n in _WALL_OUT}
+        for c in cases}
+    print(json.dumps(fits, indent=1), f"{time.time() - t0:.0f} s", flush=True)
+    return fits
+
+
+def main_radius(n_radii=12, h_over_r=1.6, f_d=32.0, seed0=3000):
+    import blurtrap as bt
+
+    f_d = round(f_d * N / FS) * FS / N
+    h = h_over_r * R
+    (x, stage), = _wall_traces(1, h_over_r, f_d, seed0)
+    s = 0.03 * R
+    one = bt.calibrate(_wall_recording(x, stage, f_d, h, radius_err=s), hydrodynamics=True)
+    names = list(one.param_names)
+    cov = np.asarray(one.covariance)
+    ir = names.index("hydro_radius")
+    radii = R + s * np.random.default_rng(seed0).standard_normal(n_radii)
+    vals = []
+    t0 = time.time()
+    for rad in radii:
+        r = bt.calibrate(_wall_recording(x, stage, f_d, h, radius=float(rad)),
+                         hydrodynamics=True)
+        vals.append(np.asarray(r.values))
+    vals = np.asarray(vals)
+    out = {}
+    for n in _WALL_OUT:
+        i = names.index(n)
+        part = abs(cov[i, ir]) / s  # |dy/dR| s: the radius's part of the error
+        sd = float(np.std(vals[:, i], ddof=1))
+        rel = 100 / one.values[i]
+        out[n] = dict(propagated_pct=part * rel, mc_sd_pct=sd * rel,
+                      mc_sd_se_pct=sd * rel / math.sqrt(2 * (n_radii - 1)),
+                      slope_ratio=float(np.polyfit(radii, vals[:, i], 1)[0] * s**2 / cov[i, ir]))
+    # linear in R: the MC SD is the propagated part times the draws' own SD / s
+    out["radii_sd_over_s"] = float(np.std(radii, ddof=1) / s)
+    print(json.dumps(out, indent=1), f"{time.time() - t0:.0f} s", flush=True)
+    return out
+
+
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "active":
+    if len(sys.argv) > 1 and sys.argv[1] in ("active_wall", "radius"):
+        a = sys.argv[2:]
+        fn = main_active_wall if sys.argv[1] == "active_wall" else main_radius
+        fn(int(a[0]) if a else (30 if fn is main_active_wall else 12),
+           float(a[1]) if len(a) > 1 else 1.6, float(a[2]) if len(a) > 2 else 32.0,
+           int(a[3]) if len(a) > 3 else 3000)
+    elif len(sys.argv) > 1 and sys.argv[1] == "active":
         a = sys.argv[2:]
         main_active(int(a[0]) if a else 50, float(a[1]) if len(a) > 1 else EPS,
                     float(a[2]) if len(a) > 2 else 32.0, int(a[3]) if len(a) > 3 else 2000)

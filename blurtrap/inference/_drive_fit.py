@@ -2,6 +2,8 @@
 stage drive; :mod:`._instrument` module docstring): ``Rd = sinc(f_d W) |H(f_d)| |T(f_d)| /
 |r|`` with the bead's ``H`` (:func:`._active.fluid_response`; with the known bead's
 hydrodynamics in the model, Tolic-Norrelykke et al. 2006 eq. D3, :mod:`._hydro_drive`).
+:func:`drive_shape_at` takes the bead's radius from the fit vector, so that the uncertainty of
+a given radius reaches Rd through ``G(f_d)`` too (:mod:`._radius_error`).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import math
 
 import numpy as np
 
-__all__ = ["rd_from_drive", "drive_shape_of", "drive_check"]
+__all__ = ["rd_from_drive", "drive_shape_of", "drive_shape_at", "drive_check"]
 
 
 def rd_from_drive(values, names, drive, model, shape=(1.0, None)):
@@ -43,6 +45,24 @@ def drive_shape_of(plan, gamma=None):
         return 1.0, None
     rec = plan.recordings[plan.drive[4]]
     return drive_shape(plan.model, plan.fixed, rec.temperature, plan.drive[2], gamma)
+
+
+def drive_shape_at(plan, values, names):
+    """``(G, f_m)`` of the plan's bead at the drive with the radius the fit vector ``values``
+    holds for ``hydro_radius`` (the bead's inertia friction rescaled with it,
+    :func:`._radius_error.model_at`), so that a derivative of the outputs in that entry
+    carries the radius's route through the drive response; :func:`drive_shape_of` without
+    the known bead's hydrodynamics."""
+    from ._hydro_drive import drive_shape
+    from ._radius_error import model_at
+
+    if plan.drive is None or "hydro_radius" not in plan.fixed or "hydro_radius" not in names:
+        return drive_shape_of(plan)
+    rec = plan.recordings[plan.drive[4]]
+    nominal = plan.fixed["hydro_radius"][0]
+    radius = float(values[list(names).index("hydro_radius")])
+    mdl = model_at(plan.model, rec, radius, nominal)
+    return drive_shape(mdl, {"hydro_radius": (radius, 0.0)}, rec.temperature, plan.drive[2])
 
 
 def drive_check(res, plan):

@@ -47,7 +47,10 @@ samples, f_c ~ 600 Hz, 200 nm drive (the setting of tests/inference/test_active_
 predicted Rd +24 % (32 Hz) and +11 % (300 Hz), measured +29/+31 % and +15/+18 % on two seeds
 each; R = 1.5 um, f_c = 588 Hz: predicted +17 % and +7.9 % (6.4 and 4.9 SE), measured over 50
 seeds +22 to +40 % and +11 to +22 % (benchmarks/RESULTS_instruments.md, 6b): the
-linearisation understates the size, not the decision.
+linearisation understates the size, not the decision. Near a surface (eq. D6 with
+``distance_to_surface_m``) the same holds, and leaving the distance out is worse than no
+correction (6b: h = 1.6 R, 32 Hz, Rd -24 % against -9 %); the bead radius's error reaches the
+active results through the passive fit and ``G(f_d)`` alike (:mod:`._radius_error`).
 
 Numbers (R = 1.5 um polystyrene in water at 295 K, k = 0.1 pN/nm, f_c ~ 590 Hz; predicted /
 measured over 50 seeds in benchmarks/RESULTS_instruments.md):

@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from ._drive_fit import drive_check, drive_shape_of, rd_from_drive
+from ._drive_fit import drive_check, drive_shape_at, rd_from_drive
 from ._models import TrapModel
 from ._options import frequency_ranges
 
@@ -288,10 +288,11 @@ def _power_of(name):
     return _SCALING.get(base, 0)
 
 
-def _outputs(theta, names, plan, n_fit, shape):
+def _outputs(theta, names, plan, n_fit):
     """The reported vector from the fit vector (volts units) and the inputs after it."""
     values = theta[:n_fit]
     if plan.drive is not None:
+        shape = drive_shape_at(plan, values, names)  # the bead's radius from the vector
         rd = rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape)
     else:
         assert plan.gamma_known is not None
@@ -302,8 +303,9 @@ def _outputs(theta, names, plan, n_fit, shape):
 
 
 def _volts_result(res, plan):
+    from ._radius_error import input_covariance, radius_error_applies, radius_note
+
     names = list(res.param_names)
-    shape = drive_shape_of(plan)
     n_fit = len(names)
     if plan.drive is not None:
         inp, inp_var = plan.drive[0], plan.drive[1] ** 2
@@ -311,19 +313,21 @@ def _volts_result(res, plan):
         inp, inp_var = plan.gamma_known[0], plan.gamma_known[1] ** 2
     theta = np.append(np.asarray(res.values, float), inp)
     cov_in = np.zeros((n_fit + 1, n_fit + 1))
-    c = np.asarray(res.covariance, float)
+    c, u = np.asarray(res.covariance, float), None
+    if radius_error_applies(plan):  # the radius through the whole fit and G(f_d)
+        c, u = input_covariance(res, plan)
     nan = ~np.isfinite(np.diag(c))
     cov_in[:n_fit, :n_fit] = np.where(np.isfinite(c), c, 0.0)
     cov_in[n_fit, n_fit] = inp_var
-    base = _outputs(theta, names, plan, n_fit, shape)
+    base = _outputs(theta, names, plan, n_fit)
     jac = np.zeros((base.size, theta.size))
     for j in range(theta.size):
         h = 1e-6 * abs(theta[j]) if theta[j] != 0 else 1e-30
         up, dn = theta.copy(), theta.copy()
         up[j] += h
         dn[j] -= h
-        jac[:, j] = (_outputs(up, names, plan, n_fit, shape)
-                     - _outputs(dn, names, plan, n_fit, shape)) / (2 * h)
+        jac[:, j] = (_outputs(up, names, plan, n_fit) - _outputs(dn, names, plan, n_fit)) / (
+            2 * h)
     cov = jac @ cov_in @ jac.T
     if nan.any():
         idx = np.flatnonzero(nan)
@@ -332,8 +336,10 @@ def _volts_result(res, plan):
         cov[idx, idx] = np.nan
     rd = base[n_fit]
     k_rec, k_err = _k_per_recording(res, names, base, cov)
+    out_names = tuple(names) + ("displacement_sensitivity", "force_sensitivity")
+    extra = () if u is None else (radius_note(jac[:, :n_fit] @ u, out_names, base, cov, plan),)
     return dataclasses.replace(
-        res, param_names=tuple(names) + ("displacement_sensitivity", "force_sensitivity"),
+        res, param_names=out_names,
         values=base, covariance=cov, k_per_recording=k_rec, k_per_recording_err=k_err,
         interval_source=None,
         notes=res.notes + (
@@ -343,7 +349,7 @@ def _volts_result(res, plan):
                if plan.drive is not None else "the known friction")
             + f"; force sensitivity Rf = k Rd = {base[n_fit + 1] * 1e12:.6g} +- "
             f"{math.sqrt(cov[n_fit + 1, n_fit + 1]) * 1e12:.3g} pN/V; k, gamma and eps^2 are "
-            "in SI (m), errors include the sensitivity's",))
+            "in SI (m), errors include the sensitivity's",) + extra)
 
 
 def _k_per_recording(res, names, base, cov):
