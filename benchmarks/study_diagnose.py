@@ -310,6 +310,7 @@ def run_one(name, seed):
         "scenario": name, "seed": seed, "wall_s": wall, "adequate": bool(d.adequate),
         "threshold": d.threshold, "gof_p": float(d.gof["p_value"]),
         "top": top.effect if top else None, "top_significant": bool(top.significant) if top else False,
+        "top_required": bool(getattr(top, "required", False)) if top else False,
         "top_p": float(top.p_value) if top else None,
         "top_daic": (None if top is None or top.delta_aic is None else float(top.delta_aic)),
         "significant": [c.effect for c in d.ranking if c.significant],
@@ -324,7 +325,7 @@ def run_one(name, seed):
         # tracking-noise floor (motion_blur+aliasing[+tracking_noise])
         named = top is not None and (top.effect == effect or (
             effect == "motion_blur+aliasing" and top.effect.startswith(effect + "+")))
-        row["identified"] = bool(named and top.significant)
+        row["identified"] = bool(named and (top.significant or getattr(top, "required", False)))
         t1 = time.perf_counter()
         rem, ok3, ok2 = (refit_check(name, kind, data, d, fit) if row["identified"]
                          else (None, None, None))

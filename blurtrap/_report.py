@@ -206,7 +206,8 @@ def _ranking_table(d) -> list[str]:
              "|---|---|---|---|---|---|---|"]
     for i, c in enumerate(d.ranking, 1):
         verdict = ("significant" if c.significant else "not significant") + (
-            "" if c.plausible else ", IMPLAUSIBLE")
+            "" if c.plausible else ", IMPLAUSIBLE") + (
+            ", required by the declared detector" if c.required else "")
         ev = str(c.evidence).replace("|", "/")
         lines.append(f"| {i} | `{c.effect}` | {_num(c.delta_loglik, '.2f')} | "
                      f"{_num(c.delta_aic, '.2f')} | {_num(c.p_value, '.3g')} | {verdict} | "
@@ -231,7 +232,7 @@ def _verdict(d) -> list[str]:
 def _before_after(d, recs, figs: rf.Figures) -> list[str]:
     """The before/after figure and the refit's table when the best candidate was refitted."""
     top = d.ranking[0] if d.ranking else None
-    if top is None or not top.significant:
+    if top is None or not (top.significant or top.required):
         figs.skipped.append("before_after.png: no candidate is significant, so nothing was "
                             "added and refitted")
         return []

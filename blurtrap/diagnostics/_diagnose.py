@@ -112,11 +112,52 @@ def _prefer_complete(ranked: list, screened: dict, base) -> list[str]:
     return []
 
 
+#: effects the recording's declared detector implies (offered as candidates only where they
+#: apply: motion blur for an exposure W > 0, aliasing for sampling without anti-aliasing) and
+#: the tracking-noise floor a camera always has, which may come with them
+_DETECTOR = frozenset({"motion_blur", "aliasing"})
+_WITH_DETECTOR = _DETECTOR | {"tracking_noise"}
+
+
+def _declared_detector(ranked: list, screened: dict, base) -> list[str]:
+    """When no candidate is significant but a candidate made of the detector physics the
+    recording declares (its exposure's blur, its sampling's aliasing, with or without the
+    tracking-noise floor) moves k or gamma by more than SENSITIVITY_SE of the base fit's errors
+    (:func:`moved_by`), the model is not adequate: the data cannot tell the two apart, yet the
+    model lacks what the instrument does by construction, and its answer is that many SE off
+    (issue: a W = dt camera recording fitted with ``naive``). The most complete such candidate
+    is marked ``required`` and ranked first (it is then refitted). Returns the note."""
+    if not ranked or any(c.significant for c in ranked):
+        return []
+    best = None
+    for i, c in enumerate(ranked):
+        members = _members(c.effect)
+        params = screened.get(c.effect)
+        if not (members & _DETECTOR and members <= _WITH_DETECTOR and c.plausible
+                and c.model is not None and params is not None):
+            continue
+        moved = moved_by(base, base.params, params)
+        rank = (len(members), c.delta_loglik if c.delta_loglik is not None else -np.inf)
+        if moved and (best is None or rank > best[0]):
+            best = (rank, i, moved)
+    if best is None:
+        return []
+    _, i, moved = best
+    c = dataclasses.replace(ranked.pop(i), required=True)
+    ranked.insert(0, c)
+    shifts = ", ".join(f"{n} by {z:+.1f} SE" for n, z in moved.items())
+    return [f"{c.effect} is part of the declared detector (exposure, sampling) but missing from "
+            f"the model: the data cannot tell the two apart (p = {c.p_value:.3g}), yet adding "
+            f"it moves {shifts}, so the model is not adequate; refit with it (ranked first)"]
+
+
 def _refit_best(recs, k, base, ranked: list, screened: dict) -> list[str]:
-    """Full fit (with errors) of the best candidate when it is significant and part of the
-    likelihood; replaces ``ranked[0]`` in place. Returns the notes (a failed refit)."""
+    """Full fit (with errors) of the best candidate when it is significant (or required by the
+    declared detector) and part of the likelihood; replaces ``ranked[0]`` in place. Returns
+    the notes (a failed refit)."""
     notes = []
-    if ranked and ranked[0].significant and ranked[0].model is not None:
+    if ranked and (ranked[0].significant or ranked[0].required) \
+            and ranked[0].model is not None:
         top = ranked[0]  # full fit (with errors) of the best candidate
         # from the screening optimum; if that fails (a parameter near its bound 0 cannot
         # converge in log coordinates), from the closed-form start
@@ -194,10 +235,11 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     out, screened = try_candidates(recs, mdl, k, base, candidates)
     ranked = _rank(out, threshold)
     notes += _prefer_complete(ranked, screened, base)
+    notes += _declared_detector(ranked, screened, base)
     notes += _refit_best(recs, k, base, ranked, screened)
     notes += _sensitivity_notes(base, ranked, screened)
     gof_ok = base.gof["p_value"] >= threshold
-    adequate = gof_ok and not any(c.significant for c in ranked)
+    adequate = gof_ok and not any(c.significant or c.required for c in ranked)
     notes += _verdict_notes(gof_ok, adequate, ranked)
     notes += detector_note(recs, settings, ranked)
     return Diagnosis(model=mdl.name, fit=base, gof=base.gof, adequate=adequate,

@@ -188,7 +188,7 @@ def _sensitivity_notes(base: CalibrationResult, ranked, screened) -> list[str]:
     out = []
     for c in ranked:
         params = screened.get(c.effect)
-        if c.significant or params is None or not c.plausible:
+        if c.significant or c.required or params is None or not c.plausible:
             continue
         shifts = [f"{n} by {z:+.1f} SE" for n, z in moved_by(base, base.params, params).items()]
         if shifts:

@@ -33,11 +33,15 @@ class Candidate:
     fit: CalibrationResult | None = None
     model: object = None  # the TrapModel with this effect added (likelihood effects only)
     plausible: bool = True  # False: the refit needs physically impossible parameters
+    #: not significant, but part of the recording's declared detector and moving k or gamma by
+    #: more than 2 SE: the model lacks it (diagnose ranks it first and is not adequate)
+    required: bool = False
 
     def __repr__(self) -> str:
         da = "n/a" if self.delta_aic is None else f"{self.delta_aic:.2f}"
         flags = ("significant" if self.significant else "not significant") + (
-            "" if self.plausible else ", IMPLAUSIBLE")
+            "" if self.plausible else ", IMPLAUSIBLE") + (
+            ", required by the declared detector" if self.required else "")
         return (f"Candidate({self.effect!r}, dAIC = {da}, p = {self.p_value:.3g}, {flags}: "
                 f"{self.evidence})")
 
@@ -57,7 +61,7 @@ class Candidate:
         return {"effect": self.effect, "delta_loglik": self.delta_loglik, "dof": self.dof,
                 "p_value": self.p_value, "delta_aic": self.delta_aic,
                 "significant": self.significant, "plausible": self.plausible,
-                "evidence": self.evidence}
+                "required": self.required, "evidence": self.evidence}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,7 +78,10 @@ class Diagnosis:
 
     @property
     def best(self) -> Candidate | None:
-        return self.ranking[0] if self.ranking and self.ranking[0].significant else None
+        """The first-ranked candidate when it is significant or required by the declared
+        detector (then the model lacks it), else None."""
+        top = self.ranking[0] if self.ranking else None
+        return top if top is not None and (top.significant or top.required) else None
 
     def __getitem__(self, effect: str) -> Candidate:
         """The candidate of one effect by its canonical name: ``d["drift"]``."""
@@ -91,7 +98,9 @@ class Diagnosis:
                     f"(Bonferroni threshold p < {self.threshold:.3g})")
         b = self.best
         return ("NOT adequate" + (f": the best missing effect is {b.effect} (dAIC = "
-                                  f"{_num(b.delta_aic, '.2f')}, p = {b.p_value:.3g})"
+                                  f"{_num(b.delta_aic, '.2f')}, p = {b.p_value:.3g}"
+                                  + ("; required by the declared detector: it moves k or "
+                                     "gamma by > 2 SE" if b.required else "") + ")"
                                   if b is not None else ""))
 
     def __repr__(self) -> str:
@@ -141,11 +150,14 @@ class Diagnosis:
         else:
             lines.append("The model is NOT adequate.")
         for c in self.ranking:
-            mark = "*" if c.significant else " "
+            mark = "*" if c.significant else ("!" if c.required else " ")
             dl = "n/a" if c.delta_loglik is None else f"{c.delta_loglik:10.2f}"
             da = "n/a" if c.delta_aic is None else f"{c.delta_aic:10.2f}"
             lines.append(f" {mark} {c.effect:<16s} dlogL = {dl}  dAIC = {da}  "
                          f"p = {c.p_value:.3g}  {c.evidence}")
+        if any(c.required for c in self.ranking):
+            lines.append("(* significant; ! required by the declared detector: not significant "
+                         "alone, but it moves k or gamma by more than 2 SE)")
         lines.extend(f"note: {n}" for n in self.notes)
         return "\n".join(lines)
 

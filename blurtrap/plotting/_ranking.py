@@ -28,7 +28,8 @@ def _ranking_rows(ranking):
                 raise ValueError(f"each ranking entry needs 'effect' and 'delta_aic'; got {r!r}")
         elif hasattr(r, "effect") and hasattr(r, "delta_aic"):
             r = {k: getattr(r, k) for k in ("effect", "delta_aic", "p_value", "significant",
-                                               "plausible", "evidence") if hasattr(r, k)}
+                                               "plausible", "required", "evidence")
+                 if hasattr(r, k)}
         else:
             raise ValueError("ranking must be a Diagnosis, a sequence of Candidates or of "
                              f"mappings with 'effect' and 'delta_aic'; got an item {r!r}")
@@ -38,13 +39,14 @@ def _ranking_rows(ranking):
                      "p_value": None if r.get("p_value") is None else float(r["p_value"]),
                      "significant": None if r.get("significant") is None
                      else bool(r["significant"]),
-                     "plausible": bool(r.get("plausible", True))})
+                     "plausible": bool(r.get("plausible", True)),
+                     "required": bool(r.get("required", False))})
     return rows, diag
 
 
 def _ranking_key(item):
     i, r = item
-    sig = r["significant"] is True
+    sig = r["significant"] is True or r["required"]  # diagnose's first (the missing effect)
     d = r["delta_aic"]
     if d is None:  # not comparable by AIC: a significant one leads (as in diagnose), else last
         d = math.inf if sig else -math.inf
@@ -115,7 +117,10 @@ def diagnose_ranking(ranking, *, ax=None, thresholds=None):
         sig, v, p = r["significant"], r["delta_aic"], r["p_value"]
         color = (_NO_VERDICT_COLOR if sig is None else _SIG_COLOR if sig else _NOT_SIG_COLOR)
         ptxt = "" if p is None else f"p = {p:.2g}"
-        if not r["plausible"]:
+        if r["required"]:
+            kinds.add("req")
+            color = _SIG_COLOR
+        elif not r["plausible"]:
             kinds.add("implausible")
             color = _IMPLAUSIBLE_COLOR
         else:
@@ -130,11 +135,14 @@ def diagnose_ranking(ranking, *, ax=None, thresholds=None):
                     transform=band, ha="center", va="center", fontsize=8,
                     bbox=dict(facecolor="white", edgecolor="none", pad=1.0))
             continue
-        ax.barh([y], [v], color=color, hatch=None if r["plausible"] else "xx",
+        hatch = ".." if r["required"] else (None if r["plausible"] else "xx")
+        ax.barh([y], [v], color=color, hatch=hatch,
                 edgecolor="0.3" if not r["plausible"] else color, gid=f"bar: {r['effect']}")
         note = f" {v:.3g}" + (f", {ptxt}" if ptxt else "")
         if not r["plausible"]:
             note += ", IMPLAUSIBLE"
+        if r["required"]:
+            note += ", required by the declared detector"
         ax.text(max(v, 0.0), y, note, va="center", ha="left", fontsize=8)
     labels = [r["effect"] + ("\n(IMPLAUSIBLE)" if not r["plausible"] else "") for r in rows]
     ax.set_yticks(ypos, labels)
@@ -150,13 +158,15 @@ def diagnose_ranking(ranking, *, ax=None, thresholds=None):
     legend = {
         "sig": Patch(facecolor=_SIG_COLOR, label="significant (diagnose's verdict)"),
         "not": Patch(facecolor=_NOT_SIG_COLOR, label="not significant"),
+        "req": Patch(facecolor=_SIG_COLOR, hatch="..", edgecolor="0.3",
+                     label="required by the declared detector (moves k or gamma > 2 SE)"),
         "none": Patch(facecolor=_NO_VERDICT_COLOR, label="no verdict given"),
         "implausible": Patch(facecolor=_IMPLAUSIBLE_COLOR, hatch="xx", edgecolor="0.3",
                              label="physically implausible: never significant"),
         "n/a": Patch(facecolor="none", hatch="//", edgecolor="0.45",
                      label="not comparable by AIC (outside the likelihood)"),
     }
-    ax.legend(handles=[legend[k] for k in ("sig", "not", "none", "implausible", "n/a")
+    ax.legend(handles=[legend[k] for k in ("sig", "req", "not", "none", "implausible", "n/a")
                        if k in kinds], fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0),
               borderaxespad=0.0)
     return fig
