@@ -23,12 +23,14 @@ import numpy as np
 import optimistix as optx
 
 from .._config import float64_scope
-from ..physics import BOLTZMANN, water_viscosity
+from ..physics import BOLTZMANN
+from ._bounds import bound_probability, bounded_covariance
+from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
+from ._checks import _check, _checked_friction, _checked_noise, checked_trap
 from ._fisher import whittle_information
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
 
-TARGETS = ("k", "gamma", "both", "determinant", "force_sensitivity")
 #: the relative SE standing for "exactly known friction" (its prior precision 1/SE^2 makes the
 #: fit's log gamma fixed to rounding; the information of the data is ~1e4-1e10)
 _EXACT_FRICTION_SE = 1e-12
@@ -62,41 +64,6 @@ def _with_friction_prior(infos, friction_se):
     prec = jnp.where(friction_se < 0, 0.0,
                      1.0 / jnp.maximum(friction_se, _EXACT_FRICTION_SE) ** 2)
     return infos.at[:, 1, 1].add(prec)
-
-
-def bounded_covariance(cov):
-    """The covariance ``cov`` (..., n_par, n_par) of the estimates when eps^2 >= 0 is enforced.
-
-    Near eps^2 = 0 the fit's eps^2 lands on its bound in a fraction ``Phi(-z)`` of the
-    experiments (``z = 1 / relative SE of eps^2``), and there k and gamma move to the
-    constrained optimum, which reduces their scatter below the unconstrained Cramer-Rao bound
-    (design b of benchmarks/RESULTS_design.md: SD/CRB 0.87-0.88). In the quadratic
-    approximation of the log-likelihood the unconstrained estimate is ``Z ~ N(theta, cov)``
-    (eps^2 in natural units) and the constrained one its projection onto ``eps^2 >= 0`` in the
-    metric ``inv(cov)``: ``theta_o = Z_o - (cov_oe / cov_ee) min(Z_e, 0)``, so
-    ``Cov(theta_o) = cov_oo - (1 - v) cov_oe cov_eo / cov_ee`` with ``v`` the variance of the
-    censored normal ``max(Z_e, 0)`` in units of ``cov_ee``. Without a noise parameter (2 x 2),
-    or far from the bound (``v`` -> 1), ``cov`` is returned unchanged. Rows of log eps^2 become
-    the relative scatter of eps^2 itself (the censored estimate can be 0)."""
-    if cov.shape[-1] < 3:
-        return cov
-    s_ee = cov[..., 2, 2]
-    z = 1.0 / jnp.sqrt(s_ee)  # mean / SD of eps^2's estimate (relative SE in log units)
-    cdf = jax.scipy.special.ndtr(z)
-    pdf = jnp.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
-    m1 = z * cdf + pdf
-    m2 = (z * z + 1.0) * cdf + z * pdf
-    v = jnp.clip(m2 - m1 * m1, 0.0, 1.0)
-    c = cov[..., :, 2]
-    return cov - ((1.0 - v) / s_ee)[..., None, None] * c[..., :, None] * c[..., None, :]
-
-
-def bound_probability(cov):
-    """Probability that eps^2's estimate sits at its bound 0: ``Phi(-1 / relative SE)``
-    (0 without a noise parameter)."""
-    if cov.shape[-1] < 3:
-        return jnp.zeros(cov.shape[:-2])
-    return jax.scipy.special.ndtr(-1.0 / jnp.sqrt(cov[..., 2, 2]))
 
 
 def relative_covariance(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise,
@@ -252,43 +219,6 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
                        unconstrained_se=unconstrained, bound_probability=np.asarray(p_bound))
 
 
-def _check(name, value, lo=0.0, unit=""):
-    if value is None or not np.isfinite(value) or value <= lo:
-        raise ValueError(f"{name} must be a finite number > {lo:g} {unit}; got {name} = "
-                         f"{value!r}")
-    return float(value)
-
-
-def _checked_friction(target, friction_error) -> float:
-    """The target and the friction prior checked: ``friction_se`` (< 0: friction fitted)."""
-    if target not in TARGETS:
-        raise ValueError(f"target must be one of {TARGETS}; got target = {target!r}")
-    if friction_error is None:
-        if target == "force_sensitivity":
-            raise ValueError("target='force_sensitivity' is the passive calibration in volts "
-                             "with the friction known from the bead: give friction_error (its "
-                             "relative SE, >= 0)")
-    else:
-        if (isinstance(friction_error, bool) or not np.isfinite(friction_error)
-                or friction_error < 0):
-            raise ValueError(f"friction_error must be a relative SE >= 0 (or None: friction "
-                             f"fitted); got friction_error = {friction_error!r}")
-        if friction_error == 0 and target in ("gamma", "both", "determinant"):
-            raise ValueError(f"target={target!r} needs the SE of gamma, but friction_error = 0 "
-                             "says gamma is known exactly; use target='k' or "
-                             "'force_sensitivity', or give friction_error > 0")
-    return -1.0 if friction_error is None else float(friction_error)
-
-
-def _checked_noise(tracking_std, photon_limited) -> float:
-    """eps_ref^2 [m^2] from the tracking-error rms, checked."""
-    if tracking_std < 0 or not np.isfinite(tracking_std):
-        raise ValueError(f"tracking_std must be >= 0 [m]; got {tracking_std!r}")
-    if photon_limited and tracking_std == 0:
-        raise ValueError("photon_limited needs tracking_std > 0 at the reference exposure")
-    return float(tracking_std) ** 2
-
-
 def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time: float,
                budget: float, by_time: bool, powers=None,
                label: str | None = None) -> Acquisition | None:
@@ -381,19 +311,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     """
     friction_se = _checked_friction(target, friction_error)
     powers = checked_powers(laser_powers)
-    ks = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
-    if len(ks) == 2:
-        ks = tuple(np.geomspace(ks[0], ks[1], 3))
-    for v in ks:
-        _check("k", v, unit="N/m")
-    temperature = _check("temperature", temperature, unit="K")
-    if gamma is None:
-        if radius is None:
-            raise ValueError("give gamma [N s/m] or the bead radius [m]")
-        eta = viscosity if viscosity is not None else float(water_viscosity(temperature))
-        gamma = 6.0 * math.pi * _check("viscosity", eta, unit="Pa s") * _check(
-            "radius", radius, unit="m")
-    gamma = _check("gamma", gamma, unit="N s/m")
+    ks, gamma, temperature = checked_trap(k, gamma, radius, viscosity, temperature)
     dt_min = 1.0 / _check("max_fps", max_fps, unit="Hz")
     if (n_frames is None) == (total_time is None):
         raise ValueError("give exactly one of n_frames (per recording) or total_time [s]")
