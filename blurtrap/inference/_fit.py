@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ._bound_errors import release_bound
+from ._chunked import chunked_applies, coarse_chunks, host_newton_minimise, ordinate_chunks
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
     as_objective,
@@ -202,23 +203,31 @@ def _newton_fit(nll, scale, args, rtol, atol, max_steps=NEWTON_STEPS) -> _Newton
     pass_fn, coarse = _plan(nll, args)
     x0 = jnp.zeros_like(scale)
     if coarse is not None:
-        c = newton_minimise(pass_fn, scale, coarse, x0, COARSE_TOL, COARSE_TOL,
-                            COARSE_STEPS).state
-        xc = c.x - c.step
-        # accepted only if it converged to a finite point that lowers the coarse objective
-        # below its value at the closed-form start (quadratic model at the last step)
-        good = (c.done & jnp.all(jnp.isfinite(xc))
-                & (c.value - 0.5 * jnp.dot(c.grad, c.step) <= c.value_start))
-        x0 = jnp.where(good, xc, x0)
+        x0 = _coarse_start(newton_minimise(pass_fn, scale, coarse, x0, COARSE_TOL,
+                                           COARSE_TOL, COARSE_STEPS).state, x0)
     sol = newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps)
-    st = sol.state
+    return _fit_from_state(sol.state, sol.result)
+
+
+def _coarse_start(c, x0):
+    """The start of the full fit after the coarse one (state ``c``): its estimate, accepted
+    only if it converged to a finite point that lowers the coarse objective below its value
+    at the closed-form start ``x0`` (quadratic model at the last step)."""
+    xc = c.x - c.step
+    good = (c.done & jnp.all(jnp.isfinite(xc))
+            & (c.value - 0.5 * jnp.dot(c.grad, c.step) <= c.value_start))
+    return jnp.where(good, xc, x0)
+
+
+def _fit_from_state(st, sol_result) -> _NewtonFit:
+    """:class:`_NewtonFit` from the final Newton state and the minimiser's result code."""
     x_hat = st.x - st.step
     v_hat = st.value - 0.5 * jnp.dot(st.grad, st.step)
     ok = st.done & jnp.all(jnp.isfinite(x_hat)) & (v_hat <= st.value_start)
     result = optx.RESULTS.where(
         ok, optx.RESULTS.successful,
-        optx.RESULTS.where(sol.result == optx.RESULTS.successful,
-                           optx.RESULTS.nonlinear_divergence, sol.result))
+        optx.RESULTS.where(sol_result == optx.RESULTS.successful,
+                           optx.RESULTS.nonlinear_divergence, sol_result))
     return _NewtonFit(x_hat, st.x, v_hat, st.grad, st.hess, ok, st.n_steps, result)
 
 
@@ -245,6 +254,32 @@ def _newton_jit(nll, scale, args, rtol, atol):
                         x_value=r.x_hat, result=r.result)
 
 
+_coarse_start_jit = eqx.filter_jit(_coarse_start)
+
+
+@eqx.filter_jit
+def _finish_state_jit(st, sol_result, scale):
+    r = _fit_from_state(st, sol_result)
+    return _finish_from(r.x, r.value, r.grad, r.hess, scale, r.ok, r.n_steps,
+                        x_value=r.x_hat, result=r.result)
+
+
+def _chunked_newton(nll, scale, args, rtol, atol, max_steps=NEWTON_STEPS) -> FitOutput:
+    """:func:`_newton_jit` with the ordinates in fixed-size chunks and the Newton loop on the
+    host (:mod:`._chunked`): the same iteration, but only the per-chunk pass depends on the
+    record length, and its chunk shapes are a small fixed set, so a recording of a new length
+    compiles nothing new once a first one of at least two chunks was fitted."""
+    x0 = jnp.zeros_like(scale)
+    coarse = coarse_chunks(args)
+    if coarse is not None:
+        c, _ = host_newton_minimise(nll, scale, coarse, x0, COARSE_TOL, COARSE_TOL,
+                                    COARSE_STEPS)
+        x0 = _coarse_start_jit(c, x0)
+    st, result = host_newton_minimise(nll, scale, ordinate_chunks(args), x0, rtol, atol,
+                                      max_steps)
+    return _finish_state_jit(st, result, scale)
+
+
 @eqx.filter_jit
 def _bfgs_jit(nll, scale, args, rtol, atol, max_steps):
     f, x, result, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
@@ -264,7 +299,10 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
     (a fit whose errors are not used: they stay conditional).
     """
-    out = _newton_jit(nll, scale, args, rtol, atol)
+    if chunked_applies(nll, args):
+        out = _chunked_newton(nll, scale, args, rtol, atol)
+    else:
+        out = _newton_jit(nll, scale, args, rtol, atol)
     if not (bool(out.converged) and bool(out.hessian_pd)):
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
     return release_bound(nll, scale, args, out) if release else out
