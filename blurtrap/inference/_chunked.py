@@ -30,6 +30,9 @@ from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applie
 #: ordinates per chunk (a power of two); ``None`` turns the chunked fit off (one compiled
 #: Newton loop per padded length, the previous behaviour)
 CHUNK: int | None = 1 << 14
+#: the exact (finite-difference Newton) fits also run their loop on the host, so that only
+#: their pass is compiled per padded length; False: one compiled loop (the previous way)
+HOST_NEWTON = True
 
 
 def chunked_applies(nll, args) -> bool:

@@ -20,7 +20,6 @@ faster pass and a cheap coarse version of its data for start values (see
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -28,10 +27,13 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from . import _chunked
 from ._bound_errors import release_bound
+from ._chi2 import chi2_sf as chi2_sf
 from ._chunked import chunked_applies, coarse_chunks, host_newton_minimise, ordinate_chunks
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
+    FdObjective,
     as_objective,
     autodiff_pass,
     fd_hessian_pass,
@@ -293,7 +295,9 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     Newton on the score first (:class:`blurtrap.inference._newton.SafeguardedNewton`, with
     the objective's own value/gradient/Hessian pass when ``nll`` is an
     :class:`~blurtrap.inference._newton.AbstractObjective` that has one); if it fails (or
-    lands on a non-minimum) BFGS takes over, compiled only when needed. ``nll`` must be a
+    lands on a non-minimum) BFGS takes over, compiled only when needed. The default Whittle
+    objective runs the same iteration in fixed-size ordinate chunks with the loop on the host
+    (:func:`_chunked_newton`: a new record length compiles nothing). ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
@@ -321,14 +325,21 @@ def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=
     return p, float(v), bool(ok)
 
 
+def _finish_fd(st, sol_result, scale):
+    """FitOutput of the finite-difference Newton fit from its final state and result code."""
+    ok = st.done & jnp.all(jnp.isfinite(jnp.where(st.done, st.x - st.step, st.x)))
+    return _finish_from(st.x, st.value - 0.5 * jnp.dot(st.grad, st.step), st.grad, st.hess,
+                        scale, ok, st.n_steps, x_value=st.x - st.step, result=sol_result)
+
+
 @eqx.filter_jit
 def _fd_newton_jit(nll, scale, args, h, tol, max_iter):
     sol = newton_minimise(fd_hessian_pass(nll, h), scale, args, jnp.zeros_like(scale), tol,
                           tol, max_iter)
-    st = sol.state
-    ok = st.done & jnp.all(jnp.isfinite(sol.value))
-    return _finish_from(st.x, st.value - 0.5 * jnp.dot(st.grad, st.step), st.grad, st.hess,
-                        scale, ok, st.n_steps, x_value=st.x - st.step, result=sol.result)
+    return _finish_fd(sol.state, sol.result, scale)
+
+
+_finish_fd_jit = eqx.filter_jit(_finish_fd)
 
 
 def fit_ml_fd_newton(
@@ -348,48 +359,12 @@ def fit_ml_fd_newton(
     (:func:`._bound_errors.release_bound`, its Hessian by differences of the autodiff
     gradient).
     """
-    out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
+    if _chunked.HOST_NEWTON:  # only the pass is compiled per padded length
+        st, res = host_newton_minimise(FdObjective(nll, h), scale, [args],
+                                       jnp.zeros_like(scale), tol, tol, max_iter)
+        out = _finish_fd_jit(st, res, scale)
+    else:
+        out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
     if not bool(out.converged):
         out = _bfgs_jit(nll, scale, args, tol, tol, max_steps)
     return release_bound(nll, scale, args, out, fd=True)
-
-
-def chi2_sf(x, dof) -> float:
-    """Survival function P(chi^2_dof > x) for scalars, on the host (no JAX compilation):
-    the regularised upper incomplete gamma Q(dof/2, x/2) by its series (x < a + 1) or
-    continued fraction (Numerical Recipes 6.2), relative accuracy ~1e-14."""
-    a, z = 0.5 * float(dof), 0.5 * float(x)
-    if not (a > 0 and math.isfinite(a)) or math.isnan(z):
-        return math.nan
-    if z <= 0:
-        return 1.0
-    if math.isinf(z):
-        return 0.0
-    log_pref = -z + a * math.log(z) - math.lgamma(a)
-    if z < a + 1.0:  # P(a, z) by its series; Q = 1 - P is not small here
-        term = total = 1.0 / a
-        n = 0
-        while abs(term) > 1e-17 * abs(total) and n < 100000:
-            n += 1
-            term *= z / (a + n)
-            total += term
-        return max(0.0, 1.0 - total * math.exp(log_pref))
-    # Q(a, z) by the continued fraction (modified Lentz)
-    tiny = 1e-300
-    b = z + 1.0 - a
-    c = 1.0 / tiny
-    d = 1.0 / b
-    h = d
-    for i in range(1, 100000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-16:
-            break
-    return math.exp(log_pref) * h

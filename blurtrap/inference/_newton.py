@@ -73,6 +73,19 @@ class FunctionObjective(AbstractObjective):
         return self.fn(p, args)
 
 
+class FdObjective(AbstractObjective):
+    """A plain function ``nll(p, args)`` whose pass is :func:`fd_hessian_pass` (step ``h``)."""
+
+    fn: Callable
+    h: float = eqx.field(static=True, default=1e-4)
+
+    def __call__(self, p, args):
+        return self.fn(p, args)
+
+    def value_grad_hess(self, x, scale, args):
+        return fd_hessian_pass(self.fn, self.h)(x, scale, args)
+
+
 def as_objective(nll) -> AbstractObjective:
     """``nll`` itself if it is an :class:`AbstractObjective`, else wrapped in
     :class:`FunctionObjective`."""
