@@ -245,3 +245,17 @@ def test_new_length_compiles_no_fit_program(compiles, monkeypatch):
             res = bt.calibrate(rec(y[:n]))
             assert res.converged and abs(res.k / 2e-5 - 1) < 5 * res.k_err / 2e-5
         assert (fit_compiles() == []) == expect_none, compiles.names
+
+
+def test_exact_fit_host_loop_equals_compiled_loop(monkeypatch):
+    """The finite-difference Newton fit of the exact likelihood with its loop on the host
+    (only the pass compiled per padded length) equals the single compiled loop."""
+    data = bt.RecordingSet([rec(frames(n, 60 + n)) for n in (2100, 2600)])
+    out = {}
+    for host in (True, False):
+        monkeypatch.setattr(_chunked, "HOST_NEWTON", host)
+        out[host] = bt.calibrate(data, likelihood="exact", k="per_recording")
+    assert out[True].converged and out[False].converged
+    np.testing.assert_allclose(out[True].values, out[False].values, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(out[True].errors, out[False].errors, rtol=1e-8, atol=0)
+    assert out[True].extras["loglik"] == pytest.approx(out[False].extras["loglik"], rel=1e-13)
