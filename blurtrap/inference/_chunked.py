@@ -47,6 +47,11 @@ def _with_ordinates(args: SpectralArgs, f, s2, power, weight) -> SpectralArgs:
                        tuple(jnp.asarray(z) for z in (f, s2, power, weight)))
 
 
+def _pad_to(z, size, mode):
+    """``z`` padded along its last axis to ``size`` (copies of the last entry, or zeros)."""
+    return np.pad(z, [(0, 0)] * (z.ndim - 1) + [(0, size - z.shape[-1])], mode=mode)
+
+
 def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
     """``args`` cut along the ordinates into consecutive pieces of exactly :data:`CHUNK`, the
     last one (or the only one) padded with copies of the last ordinate at weight 0, so that
@@ -61,9 +66,9 @@ def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
         sl = slice(i, min(i + size, m))
         if skip_empty and out and not np.any(wt[..., sl] != 0):
             continue
-        extra = [(0, 0)] * (f.ndim - 1) + [(0, size - (sl.stop - sl.start))]
-        fc, s2c, pwc = (np.pad(z[..., sl], extra, mode="edge") for z in (f, s2, pw))
-        out.append(_with_ordinates(args, fc, s2c, pwc, np.pad(wt[..., sl], extra)))
+        fc, s2c, pwc, wtc = (_pad_to(z[..., sl], size, mode) for z, mode in
+                             ((f, "edge"), (s2, "edge"), (pw, "edge"), (wt, "constant")))
+        out.append(_with_ordinates(args, fc, s2c, pwc, wtc))
     return out
 
 
