@@ -2,7 +2,9 @@
 
 ``calibrate`` pads the periodogram ordinates (spectral fits) and the frames (exact
 likelihood) to bucket lengths (``_problems.bucket_length``: powers of two by default),
-so recordings of nearby lengths share compiled programs. In one fresh process per tree this
+so recordings of nearby lengths share compiled programs; the default Whittle fit runs in
+fixed-size ordinate chunks with its Newton loop on the host (``inference/_chunked.py``), so
+a new length compiles none of its programs at all. In one fresh process per tree this
 script calibrates a first recording (compiles), repeats it (warm time), then calibrates
 ``--count`` recordings of other lengths and reports, per new length, the time minus the warm
 time of a recording of that size (the warm time is measured on each recording by a second
