@@ -2,12 +2,15 @@
 
 ``calibrate`` pads the periodogram ordinates (spectral fits) and the frames (exact
 likelihood) to bucket lengths (``_problems.bucket_length``: powers of two by default),
-so recordings of nearby lengths share compiled programs. In one fresh process per tree this
+so recordings of nearby lengths share compiled programs; the default Whittle fit runs in
+fixed-size ordinate chunks with its Newton loop on the host (``inference/_chunked.py``), so
+a new length compiles none of its programs at all. In one fresh process per tree this
 script calibrates a first recording (compiles), repeats it (warm time), then calibrates
 ``--count`` recordings of other lengths and reports, per new length, the time minus the warm
 time of a recording of that size (the warm time is measured on each recording by a second
 call). Two cases: 50 000-70 000 frames (default likelihood: Whittle) and 3000-5000 frames
-with ``likelihood="exact"``. No persistent compilation cache is enabled.
+with ``likelihood="exact"`` (``--cases 0,1``, the default), and 40 000-1 100 000 frames
+(Whittle, ``--cases 2``: many buckets). No persistent compilation cache is enabled.
 
 Run: ``python benchmarks/bench_buckets.py [--base DIR] [--count 10]`` where ``DIR`` holds
 another tree of the package (e.g. ``git worktree add --detach DIR main``); each tree runs in
@@ -50,7 +53,8 @@ print(json.dumps({"lengths": lengths, "first": first, "warm_first": warm0,
 """
 
 CASES = [("default (Whittle), 50 000-70 000 frames", 50_000, 70_000, {}),
-         ("exact, 3000-5000 frames", 3000, 5000, {"likelihood": "exact"})]
+         ("exact, 3000-5000 frames", 3000, 5000, {"likelihood": "exact"}),
+         ("default (Whittle), 40 000-1 100 000 frames", 40_000, 1_100_000, {})]
 
 
 def run_tree(path, lo, hi, count, kw, steps="default"):
@@ -68,6 +72,9 @@ def main():
     ap.add_argument("--count", type=int, default=10)
     ap.add_argument("--steps", default="1,1.25,1.5,1.75;1",
                     help="bucket step sets to compare, ';'-separated (e.g. '1' = powers of 2)")
+    ap.add_argument("--cases", default="0,1",
+                    help="which cases to run, comma-separated indices into: "
+                    + "; ".join(f"{i} = {c[0]}" for i, c in enumerate(CASES)))
     args = ap.parse_args()
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     trees = ([("before", args.base, "default")] if args.base else []) + [
@@ -78,7 +85,7 @@ def main():
 
     print(f"# {cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}",
           flush=True)
-    for label, lo, hi, kw in CASES:
+    for label, lo, hi, kw in [CASES[int(i)] for i in args.cases.split(",")]:
         for tree, path, steps in trees:
             r = run_tree(path, lo, hi, args.count, kw, steps)
             extra = [n - w for n, w in zip(r["new"], r["warm"])]

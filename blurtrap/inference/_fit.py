@@ -20,7 +20,6 @@ faster pass and a cheap coarse version of its data for start values (see
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -28,9 +27,13 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from . import _chunked
 from ._bound_errors import release_bound
+from ._chi2 import chi2_sf as chi2_sf
+from ._chunked import chunked_applies, coarse_chunks, host_newton_minimise, ordinate_chunks
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
+    FdObjective,
     as_objective,
     autodiff_pass,
     fd_hessian_pass,
@@ -202,23 +205,31 @@ def _newton_fit(nll, scale, args, rtol, atol, max_steps=NEWTON_STEPS) -> _Newton
     pass_fn, coarse = _plan(nll, args)
     x0 = jnp.zeros_like(scale)
     if coarse is not None:
-        c = newton_minimise(pass_fn, scale, coarse, x0, COARSE_TOL, COARSE_TOL,
-                            COARSE_STEPS).state
-        xc = c.x - c.step
-        # accepted only if it converged to a finite point that lowers the coarse objective
-        # below its value at the closed-form start (quadratic model at the last step)
-        good = (c.done & jnp.all(jnp.isfinite(xc))
-                & (c.value - 0.5 * jnp.dot(c.grad, c.step) <= c.value_start))
-        x0 = jnp.where(good, xc, x0)
+        x0 = _coarse_start(newton_minimise(pass_fn, scale, coarse, x0, COARSE_TOL,
+                                           COARSE_TOL, COARSE_STEPS).state, x0)
     sol = newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps)
-    st = sol.state
+    return _fit_from_state(sol.state, sol.result)
+
+
+def _coarse_start(c, x0):
+    """The start of the full fit after the coarse one (state ``c``): its estimate, accepted
+    only if it converged to a finite point that lowers the coarse objective below its value
+    at the closed-form start ``x0`` (quadratic model at the last step)."""
+    xc = c.x - c.step
+    good = (c.done & jnp.all(jnp.isfinite(xc))
+            & (c.value - 0.5 * jnp.dot(c.grad, c.step) <= c.value_start))
+    return jnp.where(good, xc, x0)
+
+
+def _fit_from_state(st, sol_result) -> _NewtonFit:
+    """:class:`_NewtonFit` from the final Newton state and the minimiser's result code."""
     x_hat = st.x - st.step
     v_hat = st.value - 0.5 * jnp.dot(st.grad, st.step)
     ok = st.done & jnp.all(jnp.isfinite(x_hat)) & (v_hat <= st.value_start)
     result = optx.RESULTS.where(
         ok, optx.RESULTS.successful,
-        optx.RESULTS.where(sol.result == optx.RESULTS.successful,
-                           optx.RESULTS.nonlinear_divergence, sol.result))
+        optx.RESULTS.where(sol_result == optx.RESULTS.successful,
+                           optx.RESULTS.nonlinear_divergence, sol_result))
     return _NewtonFit(x_hat, st.x, v_hat, st.grad, st.hess, ok, st.n_steps, result)
 
 
@@ -245,6 +256,32 @@ def _newton_jit(nll, scale, args, rtol, atol):
                         x_value=r.x_hat, result=r.result)
 
 
+_coarse_start_jit = eqx.filter_jit(_coarse_start)
+
+
+@eqx.filter_jit
+def _finish_state_jit(st, sol_result, scale):
+    r = _fit_from_state(st, sol_result)
+    return _finish_from(r.x, r.value, r.grad, r.hess, scale, r.ok, r.n_steps,
+                        x_value=r.x_hat, result=r.result)
+
+
+def _chunked_newton(nll, scale, args, rtol, atol, max_steps=NEWTON_STEPS) -> FitOutput:
+    """:func:`_newton_jit` with the ordinates in fixed-size chunks and the Newton loop on the
+    host (:mod:`._chunked`): the same iteration, but only the per-chunk pass depends on the
+    record length, and its chunk shapes are a small fixed set, so a recording of a new length
+    compiles nothing new once a first one of at least two chunks was fitted."""
+    x0 = jnp.zeros_like(scale)
+    coarse = coarse_chunks(args)
+    if coarse is not None:
+        c, _ = host_newton_minimise(nll, scale, coarse, x0, COARSE_TOL, COARSE_TOL,
+                                    COARSE_STEPS)
+        x0 = _coarse_start_jit(c, x0)
+    st, result = host_newton_minimise(nll, scale, ordinate_chunks(args), x0, rtol, atol,
+                                      max_steps)
+    return _finish_state_jit(st, result, scale)
+
+
 @eqx.filter_jit
 def _bfgs_jit(nll, scale, args, rtol, atol, max_steps):
     f, x, result, n = _bfgs(nll, scale, args, rtol, atol, max_steps)
@@ -258,13 +295,18 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     Newton on the score first (:class:`blurtrap.inference._newton.SafeguardedNewton`, with
     the objective's own value/gradient/Hessian pass when ``nll`` is an
     :class:`~blurtrap.inference._newton.AbstractObjective` that has one); if it fails (or
-    lands on a non-minimum) BFGS takes over, compiled only when needed. ``nll`` must be a
+    lands on a non-minimum) BFGS takes over, compiled only when needed. The default Whittle
+    objective runs the same iteration in fixed-size ordinate chunks with the loop on the host
+    (:func:`_chunked_newton`: a new record length compiles nothing). ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
     (a fit whose errors are not used: they stay conditional).
     """
-    out = _newton_jit(nll, scale, args, rtol, atol)
+    if chunked_applies(nll, args):
+        out = _chunked_newton(nll, scale, args, rtol, atol)
+    else:
+        out = _newton_jit(nll, scale, args, rtol, atol)
     if not (bool(out.converged) and bool(out.hessian_pd)):
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
     return release_bound(nll, scale, args, out) if release else out
@@ -283,14 +325,21 @@ def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=
     return p, float(v), bool(ok)
 
 
+def _finish_fd(st, sol_result, scale):
+    """FitOutput of the finite-difference Newton fit from its final state and result code."""
+    ok = st.done & jnp.all(jnp.isfinite(jnp.where(st.done, st.x - st.step, st.x)))
+    return _finish_from(st.x, st.value - 0.5 * jnp.dot(st.grad, st.step), st.grad, st.hess,
+                        scale, ok, st.n_steps, x_value=st.x - st.step, result=sol_result)
+
+
 @eqx.filter_jit
 def _fd_newton_jit(nll, scale, args, h, tol, max_iter):
     sol = newton_minimise(fd_hessian_pass(nll, h), scale, args, jnp.zeros_like(scale), tol,
                           tol, max_iter)
-    st = sol.state
-    ok = st.done & jnp.all(jnp.isfinite(sol.value))
-    return _finish_from(st.x, st.value - 0.5 * jnp.dot(st.grad, st.step), st.grad, st.hess,
-                        scale, ok, st.n_steps, x_value=st.x - st.step, result=sol.result)
+    return _finish_fd(sol.state, sol.result, scale)
+
+
+_finish_fd_jit = eqx.filter_jit(_finish_fd)
 
 
 def fit_ml_fd_newton(
@@ -310,48 +359,12 @@ def fit_ml_fd_newton(
     (:func:`._bound_errors.release_bound`, its Hessian by differences of the autodiff
     gradient).
     """
-    out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
+    if _chunked.HOST_NEWTON:  # only the pass is compiled per padded length
+        st, res = host_newton_minimise(FdObjective(nll, h), scale, [args],
+                                       jnp.zeros_like(scale), tol, tol, max_iter)
+        out = _finish_fd_jit(st, res, scale)
+    else:
+        out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
     if not bool(out.converged):
         out = _bfgs_jit(nll, scale, args, tol, tol, max_steps)
     return release_bound(nll, scale, args, out, fd=True)
-
-
-def chi2_sf(x, dof) -> float:
-    """Survival function P(chi^2_dof > x) for scalars, on the host (no JAX compilation):
-    the regularised upper incomplete gamma Q(dof/2, x/2) by its series (x < a + 1) or
-    continued fraction (Numerical Recipes 6.2), relative accuracy ~1e-14."""
-    a, z = 0.5 * float(dof), 0.5 * float(x)
-    if not (a > 0 and math.isfinite(a)) or math.isnan(z):
-        return math.nan
-    if z <= 0:
-        return 1.0
-    if math.isinf(z):
-        return 0.0
-    log_pref = -z + a * math.log(z) - math.lgamma(a)
-    if z < a + 1.0:  # P(a, z) by its series; Q = 1 - P is not small here
-        term = total = 1.0 / a
-        n = 0
-        while abs(term) > 1e-17 * abs(total) and n < 100000:
-            n += 1
-            term *= z / (a + n)
-            total += term
-        return max(0.0, 1.0 - total * math.exp(log_pref))
-    # Q(a, z) by the continued fraction (modified Lentz)
-    tiny = 1e-300
-    b = z + 1.0 - a
-    c = 1.0 / tiny
-    d = 1.0 / b
-    h = d
-    for i in range(1, 100000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-16:
-            break
-    return math.exp(log_pref) * h

@@ -73,6 +73,19 @@ class FunctionObjective(AbstractObjective):
         return self.fn(p, args)
 
 
+class FdObjective(AbstractObjective):
+    """A plain function ``nll(p, args)`` whose pass is :func:`fd_hessian_pass` (step ``h``)."""
+
+    fn: Callable
+    h: float = eqx.field(static=True, default=1e-4)
+
+    def __call__(self, p, args):
+        return self.fn(p, args)
+
+    def value_grad_hess(self, x, scale, args):
+        return fd_hessian_pass(self.fn, self.h)(x, scale, args)
+
+
 def as_objective(nll) -> AbstractObjective:
     """``nll`` itself if it is an :class:`AbstractObjective`, else wrapped in
     :class:`FunctionObjective`."""
@@ -178,8 +191,8 @@ class SafeguardedNewton(optx.AbstractMinimiser):
     counts passes: ``max_steps = n + 1`` allows ``n`` Newton steps. The final state holds the
     last accepted point, its value, gradient, Hessian and Newton step."""
 
-    rtol: float
-    atol: float
+    rtol: float | Array
+    atol: float | Array
     norm: Callable = eqx.field(static=True, default=optx.max_norm)
     flat_atol: float = 0.0
 
@@ -200,9 +213,20 @@ class SafeguardedNewton(optx.AbstractMinimiser):
         return (pd & ((a < tol) | quick)) | flat, a
 
     def step(self, fn, y, args, options, state: NewtonState, tags):
-        first = state.n_steps < 0
-        t = jnp.where(first, y, y - state.lam * state.step)
+        t = self.trial(y, state)
         vt, (gt, ht) = fn(t, args)
+        new = self.update(y, state, t, vt, gt, ht)
+        return new.x, new, (new.grad, new.hess)
+
+    @staticmethod
+    def trial(y, state: NewtonState):
+        """The point the next step evaluates: ``y`` first, then ``y - lam * step``."""
+        return jnp.where(state.n_steps < 0, y, y - state.lam * state.step)
+
+    def update(self, y, state: NewtonState, t, vt, gt, ht) -> NewtonState:
+        """The state after evaluating value ``vt``, gradient ``gt`` and Hessian ``ht`` at the
+        trial point ``t`` (:meth:`trial`): accepted or backtracked; ``.x`` is the new ``y``."""
+        first = state.n_steps < 0
         decrease = vt - state.value <= (-_ARMIJO * state.lam * jnp.dot(state.grad, state.step)
                                         + _ROUNDING * (1.0 + jnp.abs(state.value)))
         accept = first | (jnp.isfinite(vt) & jnp.all(jnp.isfinite(gt)) & decrease)
@@ -216,7 +240,7 @@ class SafeguardedNewton(optx.AbstractMinimiser):
                           n_steps=state.n_steps + 1, done=accept & done_t,
                           value_start=jnp.where(first, vt, state.value_start),
                           size_prev=pick(a, state.size_prev))
-        return new.x, new, (new.grad, new.hess)
+        return new
 
     def terminate(self, fn, y, args, options, state: NewtonState, tags):
         diverged = ~jnp.all(jnp.isfinite(state.step)) | (state.lam <= _MIN_STEP)

@@ -9,8 +9,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from . import _chunked
 from ._fit import chi2_sf
 from ._problems import SpectralArgs, bucket_length, rec_meta, spectral_model_psd
+from ._whittle_pass import _fused_pass_applies
 
 
 def _np_periodogram(y, dt, n_blocks=1):
@@ -127,5 +129,15 @@ def unpadded(args: SpectralArgs, z):
     return z[..., : int(np.max(np.asarray(args.n_ordinates)))]
 
 
-_psd_jit = eqx.filter_jit(spectral_model_psd)
+_psd_kernel = eqx.filter_jit(spectral_model_psd)
+
+
+def _psd_jit(p, args: SpectralArgs):
+    """The model spectrum ``spectral_model_psd(p, args)``, shape (R, M), compiled; for the
+    closed-form core model evaluated in the fit's ordinate chunks (:mod:`._chunked`), so that
+    a new record length compiles nothing here either."""
+    if _fused_pass_applies(args) and _chunked.CHUNK is not None:
+        parts = [np.asarray(_psd_kernel(p, c)) for c in _chunked.ordinate_chunks(args, False)]
+        return jnp.asarray(np.concatenate(parts, axis=-1)[..., :args.f.shape[-1]])
+    return _psd_kernel(p, args)
 

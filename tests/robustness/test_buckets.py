@@ -8,19 +8,36 @@ iterate before the final step, and the coarse start-value grid (``_binned_args``
 from the padded ordinates, so the Newton path (not the optimum) differs with the padding:
 measured 1.2e-8 on gamma's SE with two recordings, 1e-9 with one.
 Compilations are counted as in test_no_recompile.py.
+
+The default Whittle fit runs in fixed-size ordinate chunks with its Newton loop on the host
+(``_chunked``), so a new bucket compiles none of its programs once a recording of two chunks
+was fitted: checked against the single compiled Newton loop (``_chunked.CHUNK = None``) and
+against JAX autodiff of the whole objective.
 """
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from _simconfig import DT, GAMMA
 from test_no_recompile import CompileCounter
 
 import blurtrap as bt
-from blurtrap.inference import _problems
+from blurtrap.inference import _chunked, _problems
 from blurtrap.inference._irregular import irregular_nll, make_irregular_args
 from blurtrap.inference._models import get_model
-from blurtrap.inference._problems import bucket_length, exact_nll, make_exact_args, make_layout
+from blurtrap.inference._newton import SafeguardedNewton, autodiff_pass
+from blurtrap.inference._problems import (
+    _spectral_nll,
+    bucket_length,
+    exact_nll,
+    make_exact_args,
+    make_layout,
+    spectral_nll,
+)
+from blurtrap.inference._spectral import _spectral_args
+from blurtrap.inference._whittle_pass import _binned_args
 
 STEPS = _problems.BUCKET_STEPS  # the package default (powers of two)
 QUARTER = (1.0, 1.25, 1.5, 1.75)
@@ -142,3 +159,103 @@ def test_new_length_in_the_same_bucket_does_not_recompile(compiles, buckets, kw,
     assert res.converged and abs(res.k / 3e-5 - 1) < 5 * res.k_err / 3e-5
     bt.calibrate(rec(yc), **kw)
     assert compiles.names != []
+
+
+# ------------------------------------------------------------------------------------------
+# The default Whittle fit in fixed-size ordinate chunks (blurtrap.inference._chunked)
+# ------------------------------------------------------------------------------------------
+def _whittle_args(lengths, k_mode="shared"):
+    recs = [rec(frames(n, 30 + i)) for i, n in enumerate(lengths)]
+    model = get_model("standard")
+    layout = make_layout(recs, k_mode, True)
+    return _spectral_args(recs, layout, model, 1, None)
+
+
+def test_chunk_sums_equal_autodiff_of_the_whole_objective():
+    """Value, gradient and Hessian summed over the chunks (the last one padded, bucket
+    padding skipped) equal JAX autodiff of the Whittle objective on all ordinates at once
+    (an independent reference: no fused pass, no chunks), to 1e-11 relative."""
+    a = _whittle_args((40_000, 23_000), "per_recording")  # 20 000 ordinates: 2 chunks
+    assert a.f.shape[-1] == 32768 and _chunked.CHUNK == 16384
+    chunks = _chunked.ordinate_chunks(a)
+    assert len(chunks) == 2 and all(c.f.shape == (2, 16384) for c in chunks)
+    scale = jnp.asarray([2.1e-5, 1.9e-5, 1.05 * GAMMA, 5e-18])
+    x = jnp.asarray([0.03, -0.02, 0.01, 0.2])
+    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
+    for c in chunks:
+        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
+    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
+    for got, want in zip(acc, ref):
+        got, want = np.asarray(got), np.asarray(want)
+        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+
+
+def test_binned_ordinates_equal_the_jax_grouping():
+    """The host twin of the coarse start-value grouping equals ``_binned_args``."""
+    a = _whittle_args((40_000,))
+    a = eqx.tree_at(lambda z: z.weight, a, a.weight.at[0, 100:140].set(0.0))  # empty groups
+    for width in (2, 16, 32):
+        ref, got = _binned_args(a, width), _chunked.binned_ordinates(a, width)
+        for name in ("f", "s2", "power", "weight"):
+            np.testing.assert_allclose(np.asarray(getattr(got, name)),
+                                       np.asarray(getattr(ref, name)), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("kw, lengths", [
+    ({}, (70_000,)),
+    ({"k": "per_recording"}, (40_000, 100_000)),
+], ids=["1 recording", "2 recordings"])
+def test_chunked_fit_equals_one_compiled_fit(monkeypatch, kw, lengths):
+    """The chunked fit with its Newton loop on the host gives the estimates, errors and
+    goodness of fit of the single compiled Newton loop (``_chunked.CHUNK = None``)."""
+    data = bt.RecordingSet([rec(frames(n, 40 + i)) for i, n in enumerate(lengths)]) \
+        if len(lengths) > 1 else rec(frames(lengths[0], 40))
+    out = {}
+    for chunk in (_chunked.CHUNK, None):
+        monkeypatch.setattr(_chunked, "CHUNK", chunk)
+        out[chunk] = bt.calibrate(data, **kw)
+    a, b = out[None], out[_chunked.CHUNK or 16384]
+    assert a.converged and b.converged
+    assert a.param_names == b.param_names
+    np.testing.assert_allclose(b.values, a.values, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(b.errors, a.errors, rtol=1e-8, atol=0)
+    assert a.gof["dof"] == b.gof["dof"]
+    assert abs(a.gof["statistic"] / b.gof["statistic"] - 1) < 1e-10
+    np.testing.assert_allclose(b.extras["ratio"], a.extras["ratio"], rtol=1e-12)
+
+
+def test_new_length_compiles_no_fit_program(compiles, monkeypatch):
+    """After a first Whittle calibration of at least two chunks, recordings of new lengths in
+    new buckets (2^17 and 2^19 padded ordinates) compile none of the fit's programs; with
+    the chunks off the same sequence compiles the whole Newton loop again (the check can
+    fail)."""
+    y = frames(600_000, 50)
+    fit_programs = ("_chunk_pass", "_update", "_start", "_finish", "_coarse", "_newton",
+                    "spectral_model_psd")
+
+    def fit_compiles():
+        return [n for n in compiles.names if any(p in n for p in fit_programs)]
+
+    for chunk, expect_none in ((_chunked.CHUNK, True), (None, False)):
+        monkeypatch.setattr(_chunked, "CHUNK", chunk)
+        jax.clear_caches()  # other tests may have compiled these buckets already
+        bt.calibrate(rec(y[:40_000 if chunk else 20_000]))  # 2^15 / 2^14 ordinates
+        compiles.reset()
+        for n in ((150_000, 600_000) if chunk else (40_000,)):
+            res = bt.calibrate(rec(y[:n]))
+            assert res.converged and abs(res.k / 2e-5 - 1) < 5 * res.k_err / 2e-5
+        assert (fit_compiles() == []) == expect_none, compiles.names
+
+
+def test_exact_fit_host_loop_equals_compiled_loop(monkeypatch):
+    """The finite-difference Newton fit of the exact likelihood with its loop on the host
+    (only the pass compiled per padded length) equals the single compiled loop."""
+    data = bt.RecordingSet([rec(frames(n, 60 + n)) for n in (2100, 2600)])
+    out = {}
+    for host in (True, False):
+        monkeypatch.setattr(_chunked, "HOST_NEWTON", host)
+        out[host] = bt.calibrate(data, likelihood="exact", k="per_recording")
+    assert out[True].converged and out[False].converged
+    np.testing.assert_allclose(out[True].values, out[False].values, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(out[True].errors, out[False].errors, rtol=1e-8, atol=0)
+    assert out[True].extras["loglik"] == pytest.approx(out[False].extras["loglik"], rel=1e-13)

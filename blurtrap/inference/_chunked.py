@@ -1,0 +1,148 @@
+"""The default Whittle fit with the ordinates in fixed-size chunks, so that a recording of a
+new length compiles (almost) nothing.
+
+The Whittle/Gamma negative log-likelihood is a sum over ordinates, so its value, gradient and
+Hessian are sums over any split of the ordinates into chunks: the one-pass
+value/gradient/Hessian (:func:`._whittle_pass.spectral_newton_pass`) of each chunk, added.
+Here the ordinates of :class:`._problems.SpectralArgs` (padded to a power of two,
+``_problems.bucket_length``) are cut into chunks of :data:`CHUNK` ordinates (or one chunk of
+the padded length when it is shorter), and the safeguarded Newton iteration
+(:class:`._newton.SafeguardedNewton`, the same steps as inside ``optx.minimise``) runs on the
+host: per Newton step one compiled call per chunk and one for the update. Only the chunk pass
+depends on the record length, and only through the chunk width, a power of two up to
+:data:`CHUNK`: once a recording of at least ``CHUNK`` ordinates (2^15 frames) was fitted, a
+longer one of any length reuses every compiled program (before, each new power-of-two bucket
+recompiled the whole fit: 3-5 s, benchmarks/RESULTS.md "Shape buckets"). Chunks whose weight
+is all 0 (bucket padding) add exactly 0 and are skipped, so the padding costs nothing.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._newton import SafeguardedNewton
+from ._problems import SpectralArgs, SpectralObjective
+from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applies
+
+#: ordinates per chunk (a power of two); ``None`` turns the chunked fit off (one compiled
+#: Newton loop per padded length, the previous behaviour)
+CHUNK: int | None = 1 << 14
+#: the exact (finite-difference Newton) fits also run their loop on the host, so that only
+#: their pass is compiled per padded length; False: one compiled loop (the previous way)
+HOST_NEWTON = True
+
+
+def chunked_applies(nll, args) -> bool:
+    """The chunked fit applies: the Whittle objective of the closed-form expected periodogram
+    with no effects (the fused pass), with chunking on."""
+    return (CHUNK is not None and isinstance(nll, SpectralObjective)
+            and isinstance(args, SpectralArgs) and _fused_pass_applies(args))
+
+
+def _with_ordinates(args: SpectralArgs, f, s2, power, weight) -> SpectralArgs:
+    return eqx.tree_at(lambda a: (a.f, a.s2, a.power, a.weight), args,
+                       tuple(jnp.asarray(z) for z in (f, s2, power, weight)))
+
+
+def _pad_to(z, size, mode):
+    """``z`` padded along its last axis to ``size`` (copies of the last entry, or zeros)."""
+    return np.pad(z, [(0, 0)] * (z.ndim - 1) + [(0, size - z.shape[-1])], mode=mode)
+
+
+def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
+    """``args`` cut along the ordinates into consecutive pieces of exactly :data:`CHUNK`, the
+    last one (or the only one) padded with copies of the last ordinate at weight 0, so that
+    every piece has the same shape whatever the record length; with ``skip_empty`` the
+    pieces whose weight is all 0 are left out (they add exactly 0 to every sum), keeping at
+    least one."""
+    f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
+    m = f.shape[-1]
+    size = m if CHUNK is None else CHUNK
+    out = []
+    for i in range(0, m, size):
+        sl = slice(i, min(i + size, m))
+        if skip_empty and out and not np.any(wt[..., sl] != 0):
+            continue
+        fc, s2c, pwc, wtc = (_pad_to(z[..., sl], size, mode) for z, mode in
+                             ((f, "edge"), (s2, "edge"), (pw, "edge"), (wt, "constant")))
+        out.append(_with_ordinates(args, fc, s2c, pwc, wtc))
+    return out
+
+
+def binned_ordinates(args: SpectralArgs, width: int) -> SpectralArgs:
+    """Host (numpy) twin of :func:`._whittle_pass._binned_args`: ordinates averaged in groups
+    of ``width`` (weighted; plain mean where a group has no weight; the tail that does not
+    fill a group dropped), the group weight the sum of its weights."""
+    f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
+    n = (f.shape[-1] // width) * width
+
+    def grp(z):
+        return z[..., :n].reshape(z.shape[:-1] + (n // width, width))
+
+    w = grp(wt)
+    wsum = np.sum(w, axis=-1)
+    safe = np.where(wsum > 0, wsum, 1.0)
+
+    def mean(z):
+        return np.where(wsum > 0, np.sum(w * grp(z), axis=-1) / safe, np.mean(grp(z), axis=-1))
+
+    return _with_ordinates(args, mean(f), mean(s2), mean(pw), wsum)
+
+
+def coarse_chunks(args: SpectralArgs) -> list[SpectralArgs] | None:
+    """The chunks of the coarse start-value objective (the grouping of
+    :func:`._whittle_pass.spectral_newton_plan`), or None where it has none."""
+    width = min(_COARSE_MAX_WIDTH, args.power.shape[-1] // _COARSE_GROUPS)
+    if width < 2:
+        return None
+    return ordinate_chunks(binned_ordinates(args, width))
+
+
+@eqx.filter_jit
+def _chunk_pass(obj, x, scale, chunk, acc):
+    """``acc`` plus the value, gradient and Hessian of the objective on one chunk."""
+    v, g, h = obj.value_grad_hess(x, scale, chunk)
+    return acc[0] + v, acc[1] + g, acc[2] + h
+
+
+@eqx.filter_jit
+def _start(solver, x0):
+    state = solver.init(None, x0, None, None, None, None, None)
+    zero = (jnp.zeros((), x0.dtype), jnp.zeros_like(x0), jnp.zeros((x0.shape[0],) * 2, x0.dtype))
+    return state, zero
+
+
+@eqx.filter_jit
+def _update(solver, y, state, t, v, g, h):
+    """One Newton update after the pass at ``t``, as in ``optx.minimise``'s loop: the new
+    iterate and state, the next trial point, whether to go on, and the result code."""
+    new = solver.update(y, state, t, v, g, h)
+    stop, result = solver.terminate(None, new.x, None, None, new, None)
+    result = optx.RESULTS.where(jnp.all(jnp.isfinite(y)), result, optx.RESULTS.nonfinite)
+    go = ~stop & (result == optx.RESULTS.successful)
+    return new.x, new, solver.trial(new.x, new), go, stop, result
+
+
+def host_newton_minimise(nll, scale, chunks, x0, rtol, atol, max_steps):
+    """:func:`._newton.newton_minimise` of ``nll`` summed over ``chunks`` with the loop on the
+    host: at most ``max_steps`` Newton steps. Returns ``(state, result)`` (the final
+    :class:`._newton.NewtonState` and the ``optx.RESULTS`` of the loop)."""
+    # tolerances as arrays: one compiled update for the coarse and the full fit alike
+    solver = SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float))
+    state, zero = _start(solver, x0)
+    y = t = x0
+    stop = False
+    result = optx.RESULTS.successful
+    for _ in range(max_steps + 1):
+        acc = zero
+        for c in chunks:
+            acc = _chunk_pass(nll, t, scale, c, acc)
+        y, state, t, go, stop, result = _update(solver, y, state, t, *acc)
+        if not bool(go):
+            break
+    if not bool(stop) and bool(result == optx.RESULTS.successful):
+        result = optx.RESULTS.nonlinear_max_steps_reached
+    return state, result
