@@ -36,9 +36,10 @@ truth for gamma: the zero-frequency friction of eq. D6, ``6 pi eta R/(1 - 9R/16h
 
 ``--peer`` adds pylake on the same traces in volts: ``active_calibration=True,
 hydrodynamically_correct=True, distance_to_surface=h`` (the bulk active call above plus the
-distance: eq. D6 in its passive spectrum and drive response); Rd and k with its errors, gamma
-its ``local_drag_coefficient`` (the zero-frequency near-wall friction, against the same
-truth), Rf = k Rd (no errors reported for gamma and Rf).
+distance: eq. D6 in its passive spectrum and drive response), and the same call without the
+distance (bulk eq. D4); Rd and k with its errors, gamma its ``local_drag_coefficient`` (the
+zero-frequency friction at the wall, against the same truth; ``gamma_ex`` without the
+distance), Rf = k Rd (no errors reported for gamma and Rf).
 
 The radius's error (``radius``): one near-wall trace (seed SEED0, H_OVER_R, F_DRIVE as above)
 calibrated with the bead radius drawn N_RADII times from N(R, (3 % R)^2) (no error given):
@@ -219,22 +220,23 @@ def _wall_traces(n_seeds, h_over_r, f_d, seed0, eps=EPS):
 
 
 def _peer_wall(traces, f_d, h, truth):
-    """pylake's active hydrodynamically correct fit with ``distance_to_surface = h`` on
-    ``traces`` (the rows of the ``--peer`` option of ``active_wall``)."""
+    """pylake's active hydrodynamically correct fit with ``distance_to_surface = h`` (or none
+    when ``h`` is None) on ``traces`` (the rows of the ``--peer`` option of ``active_wall``)."""
+    extra = {} if h is None else {"distance": h}
     with tempfile.TemporaryDirectory() as tmp:
         inp, out = os.path.join(tmp, "in.npz"), os.path.join(tmp, "out.json")
         np.savez(inp, v=np.stack([x for x, _ in traces]) / RD,
                  stage=np.stack([st for _, st in traces]), f_drive=f_d, fs=FS, temperature=T,
                  radius=R, viscosity=ETA, rho_sample=RHO, rho_bead=RB,
                  fit_range=np.array([10.0, 0.4 * FS]), excluded=np.array([0.875, 1.125]) * f_d,
-                 block=100, distance=h)
+                 block=100, **extra)
         subprocess.run([PEER, os.path.join(HERE, "_peer_hydro_active.py"), inp, out],
                        check=True)
         with open(out) as fh:
             peer = json.load(fh)
     none = np.full(len(traces), np.nan)
     label = (f"pylake {peer['version']} active, hydrodynamically_correct=True, "
-             "distance_to_surface given")
+             f"distance_to_surface {'not given (bulk)' if h is None else 'given'}")
     return {label: {"Rd": _row(peer["Rd"], peer["Rd_err"], truth["displacement_sensitivity"]),
                     "gamma": _row(peer["gamma_local"], none, truth["gamma"]),
                     "k": _row(peer["k"], peer["k_err"], truth["k"]),
@@ -268,7 +270,8 @@ def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000, eps=EPS, pe
     print(json.dumps(fits, indent=1), f"{time.time() - t0:.0f} s", flush=True)
     if peer:
         t0 = time.time()
-        fits.update(_peer_wall(traces, f_d, h, truth))
+        for dist in (h, None):
+            fits.update(_peer_wall(traces, f_d, dist, truth))
         print(json.dumps(fits, indent=1), f"pylake {time.time() - t0:.0f} s", flush=True)
     return fits
 
