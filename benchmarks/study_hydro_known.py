@@ -30,8 +30,16 @@ response of eq. D3 with the same friction). blurtrap in volts, friction free, wi
 given (``distance_to_surface_m``), without it (bulk friction) and with ``hydrodynamics=False``;
 truth for gamma: the zero-frequency friction of eq. D6, ``6 pi eta R/(1 - 9R/16h)``.
 
-    nice python benchmarks/study_hydro_known.py active_wall [N_SEEDS [H_OVER_R [F_DRIVE [SEED0]]]]
-    (defaults 30, 1.6, 32 and 3000)
+    nice python benchmarks/study_hydro_known.py active_wall [N_SEEDS [H_OVER_R [F_DRIVE [SEED0
+        [TRACKING_STD_M]]]]] [--peer]
+    (defaults 30, 1.6, 32, 3000 and 0.5e-9; the thermal traces do not depend on the noise)
+
+``--peer`` adds pylake on the same traces in volts: ``active_calibration=True,
+hydrodynamically_correct=True, distance_to_surface=h`` (the bulk active call above plus the
+distance: eq. D6 in its passive spectrum and drive response), and the same call without the
+distance (bulk eq. D4); Rd and k with its errors, gamma its ``local_drag_coefficient`` (the
+zero-frequency friction at the wall, against the same truth; ``gamma_ex`` without the
+distance), Rf = k Rd (no errors reported for gamma and Rf).
 
 The radius's error (``radius``): one near-wall trace (seed SEED0, H_OVER_R, F_DRIVE as above)
 calibrated with the bead radius drawn N_RADII times from N(R, (3 % R)^2) (no error given):
@@ -203,15 +211,39 @@ def _wall_recording(x, stage, f_d, distance, radius=R, radius_err=None):
                         temperature=T, stage=stage, position_unit="V", metadata=meta)
 
 
-def _wall_traces(n_seeds, h_over_r, f_d, seed0):
+def _wall_traces(n_seeds, h_over_r, f_d, seed0, eps=EPS):
     from _wall_gen import generate_wall_driven  # pyright: ignore[reportMissingImports]
 
     return [generate_wall_driven(N, FS, K, R, seed0 + s, amplitude=200e-9, frequency=f_d,
                                  distance=h_over_r * R, eta=ETA, rho_f=RHO, rho_b=RB,
-                                 tracking_std=EPS, stage_noise=1e-9) for s in range(n_seeds)]
+                                 tracking_std=eps, stage_noise=1e-9) for s in range(n_seeds)]
 
 
-def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000):
+def _peer_wall(traces, f_d, h, truth):
+    """pylake's active hydrodynamically correct fit with ``distance_to_surface = h`` (or none
+    when ``h`` is None) on ``traces`` (the rows of the ``--peer`` option of ``active_wall``)."""
+    extra = {} if h is None else {"distance": h}
+    with tempfile.TemporaryDirectory() as tmp:
+        inp, out = os.path.join(tmp, "in.npz"), os.path.join(tmp, "out.json")
+        np.savez(inp, v=np.stack([x for x, _ in traces]) / RD,
+                 stage=np.stack([st for _, st in traces]), f_drive=f_d, fs=FS, temperature=T,
+                 radius=R, viscosity=ETA, rho_sample=RHO, rho_bead=RB,
+                 fit_range=np.array([10.0, 0.4 * FS]), excluded=np.array([0.875, 1.125]) * f_d,
+                 block=100, **extra)
+        subprocess.run([PEER, os.path.join(HERE, "_peer_hydro_active.py"), inp, out],
+                       check=True)
+        with open(out) as fh:
+            peer = json.load(fh)
+    none = np.full(len(traces), np.nan)
+    label = (f"pylake {peer['version']} active, hydrodynamically_correct=True, "
+             f"distance_to_surface {'not given (bulk)' if h is None else 'given'}")
+    return {label: {"Rd": _row(peer["Rd"], peer["Rd_err"], truth["displacement_sensitivity"]),
+                    "gamma": _row(peer["gamma_local"], none, truth["gamma"]),
+                    "k": _row(peer["k"], peer["k_err"], truth["k"]),
+                    "Rf": _row(peer["Rf"], none, truth["force_sensitivity"])}}
+
+
+def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000, eps=EPS, peer=False):
     from _wall_gen import zero_frequency_friction  # pyright: ignore[reportMissingImports]
 
     import blurtrap as bt
@@ -223,7 +255,8 @@ def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000):
              "hydrodynamics=False": (h, False)}
     rows = {c: {n: ([], []) for n in _WALL_OUT} for c in cases}
     t0 = time.time()
-    for x, stage in _wall_traces(n_seeds, h_over_r, f_d, seed0):
+    traces = _wall_traces(n_seeds, h_over_r, f_d, seed0, eps)
+    for x, stage in traces:
         for case, (dist, hd) in cases.items():
             r = bt.calibrate(_wall_recording(x, stage, f_d, dist), hydrodynamics=hd)
             err = np.sqrt(np.diag(r.covariance))
@@ -235,6 +268,11 @@ def main_active_wall(n_seeds=30, h_over_r=1.6, f_d=32.0, seed0=3000):
         "force_sensitivity", "Rf"): _row(*rows[c][n], truth[n]) for n in _WALL_OUT}
         for c in cases}
     print(json.dumps(fits, indent=1), f"{time.time() - t0:.0f} s", flush=True)
+    if peer:
+        t0 = time.time()
+        for dist in (h, None):
+            fits.update(_peer_wall(traces, f_d, dist, truth))
+        print(json.dumps(fits, indent=1), f"pylake {time.time() - t0:.0f} s", flush=True)
     return fits
 
 
@@ -273,12 +311,15 @@ def main_radius(n_radii=12, h_over_r=1.6, f_d=32.0, seed0=3000):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] in ("active_wall", "radius"):
+    if len(sys.argv) > 1 and sys.argv[1] == "active_wall":
+        a = [v for v in sys.argv[2:] if v != "--peer"]
+        main_active_wall(int(a[0]) if a else 30, float(a[1]) if len(a) > 1 else 1.6,
+                         float(a[2]) if len(a) > 2 else 32.0, int(a[3]) if len(a) > 3 else 3000,
+                         float(a[4]) if len(a) > 4 else EPS, peer="--peer" in sys.argv[2:])
+    elif len(sys.argv) > 1 and sys.argv[1] == "radius":
         a = sys.argv[2:]
-        fn = main_active_wall if sys.argv[1] == "active_wall" else main_radius
-        fn(int(a[0]) if a else (30 if fn is main_active_wall else 12),
-           float(a[1]) if len(a) > 1 else 1.6, float(a[2]) if len(a) > 2 else 32.0,
-           int(a[3]) if len(a) > 3 else 3000)
+        main_radius(int(a[0]) if a else 12, float(a[1]) if len(a) > 1 else 1.6,
+                    float(a[2]) if len(a) > 2 else 32.0, int(a[3]) if len(a) > 3 else 3000)
     elif len(sys.argv) > 1 and sys.argv[1] == "active":
         a = sys.argv[2:]
         main_active(int(a[0]) if a else 50, float(a[1]) if len(a) > 1 else EPS,
