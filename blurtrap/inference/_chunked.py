@@ -108,6 +108,11 @@ def _chunk_pass(obj, x, scale, chunk, acc):
     return acc[0] + v, acc[1] + g, acc[2] + h
 
 
+#: the result code of a non-finite iterate (``RESULTS.nonfinite`` is newer than the oldest
+#: optimistix supported, 0.0.10, which reports it as a divergence)
+_NONFINITE = getattr(optx.RESULTS, "nonfinite", optx.RESULTS.nonlinear_divergence)
+
+
 @eqx.filter_jit
 def _start(solver, x0):
     state = solver.init(None, x0, None, None, None, None, None)
@@ -121,7 +126,7 @@ def _update(solver, y, state, t, v, g, h):
     iterate and state, the next trial point, whether to go on, and the result code."""
     new = solver.update(y, state, t, v, g, h)
     stop, result = solver.terminate(None, new.x, None, None, new, None)
-    result = optx.RESULTS.where(jnp.all(jnp.isfinite(y)), result, optx.RESULTS.nonfinite)
+    result = optx.RESULTS.where(jnp.all(jnp.isfinite(y)), result, _NONFINITE)
     go = ~stop & (result == optx.RESULTS.successful)
     return new.x, new, solver.trial(new.x, new), go, stop, result
 
