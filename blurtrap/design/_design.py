@@ -27,7 +27,7 @@ from ..physics import BOLTZMANN
 from ._bounds import bound_probability, bounded_covariance
 from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
 from ._checks import _check, _checked_friction, _checked_noise, checked_trap
-from ._fisher import whittle_information
+from ._fisher import _informations, candidate_informations
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
 
@@ -38,24 +38,6 @@ _EXACT_FRICTION_SE = 1e-12
 UNIDENTIFIED_SE = 1.0
 #: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
 PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
-
-
-def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise):
-    """Whittle information (n_k, n_par, n_par) of the recordings ``recs`` ((dt, W, N) each;
-    shared k, gamma, eps^2) per stiffness in ``ks``, in (log k, log gamma[, log eps^2]).
-    A recording ``(dt, W, N, p)`` is at ``p`` times the laser power at which k is given:
-    k_i = k p (k = c P), and log k_i = log c + log p, so the first row is that of log c."""
-    dts, ws, ns = (jnp.stack([jnp.asarray(r[i], dtype=float) for r in recs]) for i in range(3))
-    ps = jnp.stack([jnp.asarray(r[3] if len(r) > 3 else 1.0, dtype=float) for r in recs])
-
-    def info(k):
-        def one(dt, w, n, p):
-            e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
-            return whittle_information(k * p, gamma, w, dt, n, temperature, e2, noise=noise)
-
-        return jnp.sum(jax.vmap(one)(dts, ws, ns, ps), axis=0)
-
-    return jax.vmap(info)(jnp.asarray(ks))
 
 
 def _with_friction_prior(infos, friction_se):
@@ -166,11 +148,9 @@ def _minimise_all(prob: _Problem, starts):
     return jax.vmap(one)(starts)
 
 
-def _evaluate(recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se, *, photon_limited,
-              noise, target):
+def _evaluate(infos, friction_se, *, target):
     """Relative SEs (n_k, n_par) with the friction prior, the force sensitivity's (n_k,) and
-    the objective of one candidate (one compiled program per static setting)."""
-    infos = _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
+    the objective of one candidate of information ``infos``."""
     unbounded = jnp.linalg.inv(_with_friction_prior(infos, friction_se))
     cov = bounded_covariance(unbounded)
     free = bounded_covariance(jnp.linalg.inv(infos))
@@ -181,7 +161,7 @@ def _evaluate(recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se, *, pho
             _objective(infos, target, friction_se), crb, bound_probability(unbounded))
 
 
-_evaluate_jit = jax.jit(_evaluate, static_argnames=("photon_limited", "noise", "target"))
+_evaluate_jit = jax.jit(_evaluate, static_argnames=("target",))
 
 
 def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
@@ -190,9 +170,9 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
     powers p times the one k is given at (a power series; k_i = k p, SE of k = SE of c)."""
     recs = tuple(tuple(float(x) for x in r) for r in recs)
     powers = tuple(r[3] for r in recs) if recs and all(len(r) == 4 for r in recs) else None
-    se, free_se, fs, obj, crb, p_bound = _evaluate_jit(
-        recs, ks, gamma, temperature, eps_ref2, w_ref, friction_se,
-        photon_limited=photon_limited, noise=eps_ref2 > 0, target=target)
+    infos = candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref,
+                                   photon_limited, eps_ref2 > 0)
+    se, free_se, fs, obj, crb, p_bound = _evaluate_jit(infos, friction_se, target=target)
     se, free_se, fs, obj = np.asarray(se), np.asarray(free_se), np.asarray(fs), float(obj)
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
     predicted = {n: se[:, i] for i, n in enumerate(names)}

@@ -1,7 +1,7 @@
 """The laser powers of :func:`blurtrap.design.design`: their check and the power-series
 candidates (k = c P, paper section 6.3: recording i at p_i times the power k is given at has
 k_i = k p_i; gamma and eps^2 shared; the information in log c is each recording's in log k_i,
-summed, as :func:`._design._informations` does for recordings ``(dt, W, N, p)``)."""
+summed, as :func:`._fisher._informations` does for recordings ``(dt, W, N, p)``)."""
 
 from __future__ import annotations
 
