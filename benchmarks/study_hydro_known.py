@@ -176,23 +176,31 @@ def main_active(n_seeds=50, eps=EPS, f_d=32.0, seed0=2000):
     t0 = time.time()
     fits = _active_fits(traces, f_d)
     print(json.dumps(fits), f"{time.time() - t0:.0f} s", flush=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        inp, out = os.path.join(tmp, "in.npz"), os.path.join(tmp, "out.json")
-        np.savez(inp, v=np.stack([x for x, _ in traces]) / RD,
-                 stage=np.stack([st for _, st in traces]), f_drive=f_d, fs=FS, temperature=T,
-                 radius=R, viscosity=ETA, rho_sample=RHO, rho_bead=RB,
-                 fit_range=np.array([10.0, 0.4 * FS]), excluded=np.array([0.875, 1.125]) * f_d,
-                 block=100)
-        subprocess.run([PEER, os.path.join(HERE, "_peer_hydro_active.py"), inp, out],
-                       check=True)
-        with open(out) as fh:
-            peer = json.load(fh)
+    peer = _run_peer_active(traces, f_d)
     fits[f"pylake {peer['version']} active, hydrodynamically_correct=True"] = {
         "Rd": _row(peer["Rd"], peer["Rd_err"], RD),
         "gamma": _row(peer["gamma"], np.full(n_seeds, np.nan), GAMMA0),
         "k": _row(peer["k"], peer["k_err"], K)}
     print(json.dumps(fits, indent=1))
     return fits
+
+
+def _run_peer_active(traces, f_d, distance=None):
+    """pylake's active hydrodynamically correct calibration of ``traces`` ((volts-scaled
+    positions, stage) pairs) in the peer venv (``_peer_hydro_active.py``), with
+    ``distance_to_surface`` when ``distance`` [m] is given; its JSON output."""
+    extra = {} if distance is None else {"distance": distance}
+    with tempfile.TemporaryDirectory() as tmp:
+        inp, out = os.path.join(tmp, "in.npz"), os.path.join(tmp, "out.json")
+        np.savez(inp, v=np.stack([x for x, _ in traces]) / RD,
+                 stage=np.stack([st for _, st in traces]), f_drive=f_d, fs=FS, temperature=T,
+                 radius=R, viscosity=ETA, rho_sample=RHO, rho_bead=RB,
+                 fit_range=np.array([10.0, 0.4 * FS]), excluded=np.array([0.875, 1.125]) * f_d,
+                 block=100, **extra)
+        subprocess.run([PEER, os.path.join(HERE, "_peer_hydro_active.py"), inp, out],
+                       check=True)
+        with open(out) as fh:
+            return json.load(fh)
 
 
 _WALL_OUT = ("displacement_sensitivity", "gamma", "k", "force_sensitivity")
@@ -222,18 +230,7 @@ def _wall_traces(n_seeds, h_over_r, f_d, seed0, eps=EPS):
 def _peer_wall(traces, f_d, h, truth):
     """pylake's active hydrodynamically correct fit with ``distance_to_surface = h`` (or none
     when ``h`` is None) on ``traces`` (the rows of the ``--peer`` option of ``active_wall``)."""
-    extra = {} if h is None else {"distance": h}
-    with tempfile.TemporaryDirectory() as tmp:
-        inp, out = os.path.join(tmp, "in.npz"), os.path.join(tmp, "out.json")
-        np.savez(inp, v=np.stack([x for x, _ in traces]) / RD,
-                 stage=np.stack([st for _, st in traces]), f_drive=f_d, fs=FS, temperature=T,
-                 radius=R, viscosity=ETA, rho_sample=RHO, rho_bead=RB,
-                 fit_range=np.array([10.0, 0.4 * FS]), excluded=np.array([0.875, 1.125]) * f_d,
-                 block=100, **extra)
-        subprocess.run([PEER, os.path.join(HERE, "_peer_hydro_active.py"), inp, out],
-                       check=True)
-        with open(out) as fh:
-            peer = json.load(fh)
+    peer = _run_peer_active(traces, f_d, distance=h)
     none = np.full(len(traces), np.nan)
     label = (f"pylake {peer['version']} active, hydrodynamically_correct=True, "
              f"distance_to_surface {'not given (bulk)' if h is None else 'given'}")
