@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from _circulant import circulant_frames
 
 import blurtrap as bt
 from blurtrap.design import bound_probability, bounded_covariance, whittle_information
 
-KB = 1.380649e-23
 T = 295.0
 GAMMA = 6 * math.pi * 0.00095 * 1.53e-6
 K = 5e-5
@@ -55,29 +55,13 @@ def test_bounded_covariance_is_the_identity_far_from_the_bound_and_without_noise
     assert float(bound_probability(cov[None])[0]) < 1e-6
 
 
-def circulant_frames(k, w, eps2, n, reps, seed):
-    """Exact stationary frames (blurred OU plus white noise) by circulant embedding:
-    C(0) = kT/k S(a) + eps2, C(m) = kT/k B(a) rho^m, a = W / tau (paper eqs. for W <= dt)."""
-    tau = GAMMA / k
-    a = w / tau
-    s = 2 / a - 2 * (1 - math.exp(-a)) / a**2
-    b = 2 * (math.cosh(a) - 1) / a**2
-    c = KB * T / k * b * math.exp(-DT / tau) ** np.arange(n + 1)
-    c[0] = KB * T / k * s + eps2
-    lam = np.fft.fft(np.concatenate([c, c[-2:0:-1]])).real
-    z = np.random.default_rng(seed).standard_normal((2, reps, lam.size))
-    amp = np.sqrt(np.maximum(lam, 0) / lam.size)
-    out = np.fft.fft(amp * (z[0] + 1j * z[1]), axis=-1)
-    return np.concatenate([out.real[:, :n], out.imag[:, :n]])  # two independent records each
-
-
 def test_design_predicts_the_scatter_of_fits_that_hit_the_bound():
     """W = 0.1 dt, 65 536 frames, eps = 1 nm: eps^2 lands on 0 in ~37 % of fits and the SD of
     log k and log gamma is ~0.70 of the Cramer-Rao bound. bt.design's predicted SE (with the
     bound) matches the scatter of 200 fits within 3 SEs of an SD estimate (15 %); the
     unconstrained bound (what the design predicted before) is ~40 % above it."""
     n, w, eps = 65536, 0.1 * DT, 1e-9
-    x = circulant_frames(K, w, eps**2, n, 100, seed=18)
+    x = circulant_frames(K, GAMMA, w, DT, eps**2, n, seed=18, reps=100, temperature=T)
     res = bt.calibrate_batch(x, frame_interval=DT, exposure=w, temperature=T)
     ok = np.array([s == "ok" for s in res.status])
     assert ok.mean() > 0.95

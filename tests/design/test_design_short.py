@@ -5,11 +5,11 @@ written apart from blurtrap), not only the Whittle approximation."""
 import math
 
 import numpy as np
+from _circulant import frame_autocovariance
 from scipy.linalg import toeplitz
 
 import blurtrap as bt
 
-KB = 1.380649e-23
 T = 295.0
 GAMMA = 6 * math.pi * 0.00095 * 1.53e-6
 K = 5e-5
@@ -17,15 +17,9 @@ DT = 1 / 1500
 
 
 def frame_cov(theta, w, n):
-    """Toeplitz covariance of n frames: C(0) = kT/k S(a) + eps2, C(m) = kT/k B(a) rho^m."""
+    """Toeplitz covariance of n frames (paper eqs. 7-8) at theta = log(k, gamma, eps2)."""
     k, gamma, eps2 = np.exp(theta)
-    tau = gamma / k
-    a = w / tau
-    s = 2 / a - 2 * (1 - math.exp(-a)) / a**2
-    b = 2 * (math.cosh(a) - 1) / a**2
-    c = KB * T / k * b * math.exp(-DT / tau) ** np.arange(n)
-    c[0] = KB * T / k * s + eps2
-    return toeplitz(c)
+    return toeplitz(frame_autocovariance(k, gamma, w, DT, eps2, n, T))
 
 
 def exact_crb(w, n, eps2):

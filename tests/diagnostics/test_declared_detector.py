@@ -6,35 +6,21 @@ of the exact frame autocovariance (numpy, not blurtrap's simulator)."""
 
 import math
 
-import numpy as np
+from _circulant import circulant_frames
 
 import blurtrap as bt
 import blurtrap.plotting as bp
 
-KB = 1.380649e-23
 T = 295.0
 K = 5e-5
 GAMMA = 6 * math.pi * 0.00095 * 1.5e-6
-
-
-def frames(k, gamma, w, dt, eps2, n, seed):
-    """Blurred OU frames plus white noise: C(0) = kT/k S(a) + eps2, C(m) = kT/k B(a) rho^m."""
-    tau = gamma / k
-    a = w / tau
-    s = 2 / a - 2 * (1 - math.exp(-a)) / a**2
-    b = 2 * (math.cosh(a) - 1) / a**2
-    c = KB * T / k * b * math.exp(-dt / tau) ** np.arange(n + 1)
-    c[0] = KB * T / k * s + eps2
-    lam = np.fft.fft(np.concatenate([c, c[-2:0:-1]])).real
-    z = np.random.default_rng(seed).standard_normal((2, lam.size))
-    return np.fft.fft(np.sqrt(np.maximum(lam, 0) / lam.size) * (z[0] + 1j * z[1])).real[:n]
 
 
 def test_naive_camera_record_the_data_cannot_reject_is_not_adequate():
     """W = dt = 1/1500 s, k = 0.05 pN/nm, 1.5 um bead, eps = 2 nm, 16 384 frames; a seed whose
     naive fit passes the goodness of fit and has no significant candidate (adequate before)."""
     dt = 1 / 1500
-    rec = bt.Recording(frames(K, GAMMA, dt, dt, 4e-18, 16384, seed=1), frame_interval=dt,
+    rec = bt.Recording(circulant_frames(K, GAMMA, dt, dt, 4e-18, 16384, seed=1), frame_interval=dt,
                        exposure=dt, temperature=T)
     d = bt.diagnose(rec, model="naive")
     assert (d.fit.k - K) / d.fit.k_err > 3  # the naive answer is confidently wrong
@@ -61,7 +47,7 @@ def test_no_requirement_where_the_detector_does_not_move_k():
     aliasing change k by far less than 2 SE, so nothing is required and naive is adequate."""
     tau = GAMMA / K
     dt = tau / 20
-    rec = bt.Recording(frames(K, GAMMA, 1e-6, dt, 0.0, 16384, seed=3), frame_interval=dt,
+    rec = bt.Recording(circulant_frames(K, GAMMA, 1e-6, dt, 0.0, 16384, seed=3), frame_interval=dt,
                        exposure=1e-6, temperature=T)
     d = bt.diagnose(rec, model="naive")
     assert not any(c.required for c in d.ranking)

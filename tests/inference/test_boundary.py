@@ -11,30 +11,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _circulant import circulant_frames
 from scipy.optimize import minimize
 
 import blurtrap as bt
 from blurtrap.inference import _profile
 from blurtrap.inference._fit import BOUND_NLL, at_lower_bound
 
-KB = 1.380649e-23
 T = 295.0
 GAMMA = 6 * math.pi * 0.00093 * 1.53e-6
 DT = 1.0 / 1500.0
 
 
 def _frames(k, w, eps2, n, seed):
-    """Exact stationary frames by circulant embedding (numpy only, not blurtrap's
-    simulator): C(0) = sigma2 S + eps2, C(n) = sigma2 B rho^n."""
-    tau = GAMMA / k
-    a = w / tau
-    s = 2 / a - 2 * (1 - math.exp(-a)) / a**2
-    b = 2 * (math.cosh(a) - 1) / a**2
-    c = KB * T / k * b * math.exp(-DT / tau) ** np.arange(n + 1)
-    c[0] = KB * T / k * s + eps2
-    lam = np.fft.fft(np.concatenate([c, c[-2:0:-1]])).real
-    z = np.random.default_rng(seed).standard_normal((2, lam.size))
-    return np.fft.fft(np.sqrt(np.maximum(lam, 0) / lam.size) * (z[0] + 1j * z[1])).real[:n]
+    """Exact stationary frames by circulant embedding (numpy only, not blurtrap's simulator)."""
+    return circulant_frames(k, GAMMA, w, DT, eps2, n, seed, temperature=T)
 
 
 def _fit(k, w, eps2, n, seed):

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from _circulant import circulant_frames
 
 import blurtrap as bt
 
-KB = 1.380649e-23
 T = 296.15
 DT = 1 / 1500
 GAMMA = 6 * math.pi * 0.00093 * 1.53e-6
@@ -19,16 +19,8 @@ K = 5e-5
 
 
 def _frames(k, w, eps2, n, seed, dt=DT, gamma=GAMMA):
-    """C(0) = sigma2 S(a) + eps2, C(n) = sigma2 B(a) exp(-n dt/tau) (paper eqs. 7-8)."""
-    tau = gamma / k
-    a = w / tau
-    s = 2 / a - 2 * (1 - math.exp(-a)) / a**2
-    b = 2 * (math.cosh(a) - 1) / a**2
-    c = KB * T / k * b * math.exp(-dt / tau) ** np.arange(n + 1)
-    c[0] = KB * T / k * s + eps2
-    lam = np.fft.fft(np.concatenate([c, c[-2:0:-1]])).real
-    z = np.random.default_rng(seed).standard_normal((2, lam.size))
-    return np.fft.fft(np.sqrt(np.maximum(lam, 0) / lam.size) * (z[0] + 1j * z[1])).real[:n]
+    """Circulant-embedded exact frames (paper eqs. 7-8; numpy, not blurtrap's simulator)."""
+    return circulant_frames(k, gamma, w, dt, eps2, n, seed, temperature=T)
 
 
 def _rec(seed, n=2**14, w=DT, eps2=4e-18, **kw):
