@@ -128,24 +128,22 @@ EXACT_MAX_FRAMES = 512
 
 _informations_jit = jax.jit(_informations, static_argnums=(6, 7))
 _exact_jit = jax.jit(exact_information, static_argnames=("n_frames", "noise"))
-_whittle_jit = jax.jit(whittle_information, static_argnames=("noise",))
 
 
 def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
                            noise):
-    """The information (n_k, n_par, n_par) of a candidate's recordings: Whittle, and the exact
-    Gaussian information for recordings of <= EXACT_MAX_FRAMES frames (short records)."""
-    infos = np.array(_informations_jit(recs, ks, gamma, temperature, eps_ref2, w_ref,
-                                       photon_limited, noise))
-    for r in recs:
-        n = int(round(r[2]))
-        if n > EXACT_MAX_FRAMES:
-            continue
+    """The information (n_k, n_par, n_par) of a candidate's recordings: Whittle for the long
+    ones, the exact Gaussian information for recordings of <= EXACT_MAX_FRAMES frames."""
+    short = [r for r in recs if int(round(r[2])) <= EXACT_MAX_FRAMES]
+    long = tuple(r for r in recs if int(round(r[2])) > EXACT_MAX_FRAMES)
+    n_par = 3 if noise else 2
+    infos = (np.array(_informations_jit(long, ks, gamma, temperature, eps_ref2, w_ref,
+                                        photon_limited, noise)) if long
+             else np.zeros((len(ks), n_par, n_par)))
+    for r in short:
         dt, w, p = r[0], r[1], (r[3] if len(r) > 3 else 1.0)
         e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
         for i, k in enumerate(ks):
-            infos[i] += np.asarray(_exact_jit(k * p, gamma, w, dt, n, temperature, e2,
-                                              noise=noise))
-            infos[i] -= np.asarray(_whittle_jit(k * p, gamma, w, dt, float(n), temperature, e2,
-                                                noise=noise))
+            infos[i] += np.asarray(_exact_jit(k * p, gamma, w, dt, int(round(r[2])),
+                                              temperature, e2, noise=noise))
     return infos
