@@ -90,3 +90,35 @@ def _prepare(y, n_blocks, m, dt, w, temp, noise, check_units):
     if not noise:
         starts = starts[:, :2]
     return power, starts, np.log(avg), stats, pre
+
+
+def _check_batch(positions, n_blocks, check_units, gof_threshold):
+    """``(positions as (B, N) float64, frames per block, gof_threshold)``, each checked."""
+    y = np.asarray(positions, dtype=float)
+    if y.ndim != 2:
+        raise ValueError(f"positions must have shape (batch, frames); got shape {y.shape}")
+    b, n = y.shape
+    if b == 0:
+        raise ValueError(f"positions holds no records (shape {y.shape}): nothing to calibrate")
+    if isinstance(n_blocks, bool) or not isinstance(n_blocks, (int, np.integer)) or n_blocks < 1:
+        raise ValueError(f"n_blocks must be an integer >= 1; got n_blocks = {n_blocks!r}")
+    m = n // n_blocks
+    if m < 8:
+        raise ValueError(f"n_blocks = {n_blocks} leaves {m} frames per block; need >= 8")
+    if not isinstance(check_units, (bool, np.bool_)):
+        raise ValueError(f"check_units must be True or False; got {check_units!r}")
+    gof_threshold = float(gof_threshold)
+    if not 0.0 <= gof_threshold < 1.0:
+        raise ValueError(f"gof_threshold must be in [0, 1); got {gof_threshold!r}")
+    return y, m, gof_threshold
+
+
+def _check_some_row_usable(y) -> None:
+    """A batch with no finite, fluctuating row has nothing to calibrate."""
+    for row in y:  # stops at the first usable row (the first, as a rule)
+        if np.isfinite(row).all() and row.max() != row.min():
+            return
+    bad = np.argwhere(~np.isfinite(y))
+    where = f" (NaN/inf first at row {bad[0][0]}, frame {bad[0][1]})" if bad.size else ""
+    raise ValueError("positions hold no finite, fluctuating row: every row is constant or "
+                     f"contains NaN/inf{where}. There is nothing to calibrate.")
