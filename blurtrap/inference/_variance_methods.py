@@ -76,18 +76,26 @@ def _fit_variance(recs, layout, model, method_name, notes):
     # 95 % profile-likelihood intervals: the Wald interval (value +- 1.96 SE) is not honest
     # here (k = kT/sigma^2 with sigma^2 and eps^2 separated only by the curvature of
     # S(alpha), and eps^2 >= 0: skewed, bounded estimates; benchmarks/RESULTS_variance_methods.md)
-    prof = profile_intervals(fitted, p, chi2)
+    info: dict[str, Any] = {}
+    prof = profile_intervals(fitted, p, chi2, info=info)
     intervals = {names[i]: prof[i] for i in range(len(names))}
     wald = np.sqrt(np.clip(np.diag(cov), 0, None))
     txt = []
-    for i, name in enumerate(names):
-        lo, hi = intervals[name]
+    for name, (lo, hi) in intervals.items():
         fac, unit = _LAB_UNITS.get(name.split("[")[0], (1.0, "SI"))
         txt.append(f"{name} [{lo * fac:.4g}, {hi * fac:.4g}] {unit}")
     notes.append("95 % profile-likelihood intervals (chi^2 profile, eps^2 >= 0, weights "
                  "re-evaluated along the profile; in result.intervals, SI): " + "; ".join(txt) + ". Use them rather "
                  "than value +- 1.96 SE: the variance methods' estimates are skewed and the "
                  "Wald interval under- or over-covers")
+    if "second_branch" in info:
+        q, d = info["second_branch"]
+        alt = ", ".join(f"{nm} = {_lab(nm, x)}" for nm, x in zip(names, q))
+        notes.append(f"{method_name}: the variances are also consistent (Delta chi^2 = {d:.2f} "
+                     f"<= 3.84) with a second branch at {alt}, separated from the estimate (the "
+                     "global minimum) by a ridge: the exposures or powers hardly separate the "
+                     "thermal variance from tracking noise. The 95 % intervals span both "
+                     "branches (the hull of the profile set)")
     unbounded = [nm for nm, (lo, hi) in intervals.items()
                  if not np.isfinite(hi) or (lo == 0.0 and nm != "tracking_var")]
     if unbounded:
@@ -113,6 +121,12 @@ def _fit_variance(recs, layout, model, method_name, notes):
         pass
     return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
                      interval_source=_given_intervals(intervals))
+
+
+def _lab(name, value):
+    """``value`` (SI) of parameter ``name`` as text in lab units."""
+    fac, unit = _LAB_UNITS.get(name.split("[")[0], (1.0, "SI"))
+    return f"{value * fac:.4g} {unit}"
 
 
 def _fit_allan(recs, layout, model, notes):

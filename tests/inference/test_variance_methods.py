@@ -178,10 +178,11 @@ def _np_variance_se(k, gamma, w, dt, eps2):
     return np.sqrt(2.0 / _N**2 * (_N * c0**2 + 2.0 * np.sum((_N - lag) * c**2)))
 
 
-def _np_profile(v, se, powers, dt, j, value, starts, point=False):
+def _np_profile(v, se, powers, dt, j, value, starts, point=False, ws=None):
     """min over the other parameters of chi^2 (weights ``se`` held), parameter j fixed at
     ``value`` (all free: ``j = None``); parameters (c, gamma, eps^2), eps^2 >= 0; scipy least
-    squares, several starts. ``point``: also return the minimiser (c, gamma, eps^2)."""
+    squares, several starts. ``point``: also return the minimiser (c, gamma, eps^2).
+    ``ws``: variance vs exposure instead (exposures ``ws``, one k = the first parameter)."""
     from scipy.optimize import least_squares
 
     def full(z):  # z: (log c, log gamma, eps^2 in units of the smallest variance)
@@ -190,6 +191,8 @@ def _np_profile(v, se, powers, dt, j, value, starts, point=False):
     def resid(zf):
         z = zf if j is None else np.insert(zf, j, fixed)
         c, g, e = full(z)
+        if ws is not None:
+            return (v - np.array([_np_expected_variance(c, g, w, dt, e) for w in ws])) / se
         return (v - np.array([_np_expected_variance(c * p, g, dt, dt, e) for p in powers])) / se
 
     fixed = None if j is None else np.log(value) if j < 2 else value / v.min()
@@ -280,3 +283,71 @@ def test_reweighted_profile_interval_ends_match_an_independent_profile():
             assert abs(delta - CHI2_95) < 0.05, (j, end, delta)
             moved += abs(end / end_held - 1) > 0.01
     assert moved >= 2
+
+
+def test_profile_interval_spans_both_branches_of_a_weak_exposure_series():
+    """Variance vs exposure at alpha = 0.05-0.5 (k = 2e-5 N/m, W/dt = 0.1..1): one fixed draw
+    whose estimate sits on the second branch (k ~5x, gamma ~0.4x, eps^2 ~40x the truth: the
+    variances read as mostly tracking noise). The reweighted profile set has two components:
+    an independent profile (numpy model, scipy least squares, weights iterated to the
+    constrained fit's model SE) has Delta chi^2 <= 3.84 at eps^2 = 0 but > 3.84 on the hump
+    between. The interval is the hull of both: eps^2 down to 0, k and gamma over the eps^2 = 0
+    point, so the truth is covered. Fails on bracketing from the estimate alone (stops at the
+    hump: eps^2 > 20x truth, k > 3x truth, gamma < 0.9x truth)."""
+    from blurtrap.inference._variance_profile import CHI2_95, profile_intervals
+
+    dt, k, gamma, eps2 = 1 / 1500, 2e-5, 2.7397829531956586e-08, 4e-18
+    ws = dt * np.array([0.1, 0.25, 0.5, 0.75, 1.0])
+    recs = [bt.Recording(1e-9 * np.arange(8.0), frame_interval=dt, exposure=w, temperature=295.0)
+            for w in ws]
+    mean = np.array([_np_expected_variance(k, gamma, w, dt, eps2) for w in ws])
+    # the sample variances of one draw of the study's generator (relative deviations)
+    v = mean * (1.0 + np.array([0.00726, -0.01381, -0.00491, 0.00293, 0.02659]))
+    args, _ = _args(recs, "shared")
+    args = _variance.eqx.tree_at(lambda x: (x.v, x.n), args,
+                                 (jnp.asarray(v), jnp.full(5, float(_N))))
+    p, cov, chi2, ok, pd, fitted = _variance.fit_variances(args, np.array([k, gamma, eps2]))
+    assert ok and pd and p[0] > 3 * k and p[1] < 0.5 * gamma and p[2] > 20 * eps2
+
+    starts = [[np.log(p[0]), np.log(p[1]), p[2] / v.min()], [np.log(k), np.log(gamma), 0.0]]
+
+    def delta_eps(e):  # reweighted profile statistic of eps^2 (independent)
+        se = np.asarray(fitted.se)
+        for _ in range(5):
+            _, (c, g, _e) = _np_profile(v, se, None, dt, 2, e, starts, point=True, ws=ws)
+            se = np.array([_np_variance_se(c, g, w, dt, e) for w in ws])
+        return (_np_profile(v, se, None, dt, 2, e, starts, ws=ws)
+                - _np_profile(v, se, None, dt, None, None, starts, ws=ws)), (c, g)
+
+    with np.errstate(over="ignore", invalid="ignore"):  # scipy trial steps reach alpha ~ 1e3
+        d0, (k0, g0) = delta_eps(0.0)
+        d_hump, _ = delta_eps(20 * eps2)
+    assert d0 < CHI2_95 < d_hump  # two components: eps^2 = 0 is inside, the hump is not
+    iv = profile_intervals(fitted, p, chi2)
+    assert iv[2][0] == 0.0
+    assert iv[0][0] <= k0 * 1.001 and iv[1][1] >= g0 * 0.999  # the hull holds the other point
+    for j, truth in enumerate((k, gamma, eps2)):
+        assert iv[j][0] <= truth <= iv[j][1], (j, iv[j])
+
+
+def test_second_branch_note_and_hull_through_calibrate():
+    """The same weak exposure series through ``calibrate``: recordings whose frame variances
+    are exactly those of the two-branch draw above (white frames rescaled: only the variances
+    enter this method). The result says that a second branch exists and where, and its
+    intervals cover the truth; a well-identified series has no such note (see
+    ``test_profile_intervals_and_joint_likelihood_note``)."""
+    dt, k, gamma, eps2 = 1 / 1500, 2e-5, 2.7397829531956586e-08, 4e-18
+    ws = dt * np.array([0.1, 0.25, 0.5, 0.75, 1.0])
+    mean = np.array([_np_expected_variance(k, gamma, w, dt, eps2) for w in ws])
+    v = mean * (1.0 + np.array([0.00726, -0.01381, -0.00491, 0.00293, 0.02659]))
+    z = np.random.default_rng(0).standard_normal(_N)
+    z = (z - z.mean()) / z.std()
+    recs = [bt.Recording(np.sqrt(vi) * z, frame_interval=dt, exposure=w, temperature=295.0)
+            for vi, w in zip(v, ws)]
+    res = bt.calibrate(recs, method="variance_vs_exposure")
+    note = [n for n in res.notes if "second branch" in n]
+    assert len(note) == 1 and "tracking_var = 0 nm^2" in note[0], res.notes
+    iv = res.extras["intervals"]
+    assert iv["tracking_var"][0] == 0.0
+    for name, truth in (("k", k), ("gamma", gamma), ("tracking_var", eps2)):
+        assert iv[name][0] <= truth <= iv[name][1], (name, iv[name])
