@@ -31,7 +31,8 @@ from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applie
 #: Newton loop per padded length, the previous behaviour)
 CHUNK: int | None = 1 << 14
 #: the exact (finite-difference Newton) fits also run their loop on the host, so that only
-#: their pass is compiled per padded length; False: one compiled loop (the previous way)
+#: their pass depends on the length (the exact likelihood's pass in fixed frame chunks:
+#: ``_exact_chunks``); False: one compiled loop (the previous way)
 HOST_NEWTON = True
 
 
@@ -131,21 +132,37 @@ def _update(solver, y, state, t, v, g, h):
     return new.x, new, solver.trial(new.x, new), go, stop, result
 
 
+def _solver(rtol, atol):
+    # tolerances as arrays: one compiled update for the coarse and the full fit alike
+    return SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float))
+
+
 def host_newton_minimise(nll, scale, chunks, x0, rtol, atol, max_steps):
     """:func:`._newton.newton_minimise` of ``nll`` summed over ``chunks`` with the loop on the
     host: at most ``max_steps`` Newton steps. Returns ``(state, result)`` (the final
     :class:`._newton.NewtonState` and the ``optx.RESULTS`` of the loop)."""
-    # tolerances as arrays: one compiled update for the coarse and the full fit alike
-    solver = SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float))
-    state, zero = _start(solver, x0)
+
+    def pass_fn(t):
+        acc = zero
+        for c in chunks:
+            acc = _chunk_pass(nll, t, scale, c, acc)
+        return acc
+
+    zero = _start(_solver(rtol, atol), x0)[1]
+    return host_newton_loop(pass_fn, x0, rtol, atol, max_steps)
+
+
+def host_newton_loop(pass_fn, x0, rtol, atol, max_steps):
+    """The safeguarded Newton iteration of :func:`._newton.newton_minimise` with the loop on
+    the host and the pass ``pass_fn(x) -> (value, grad, hess)`` (any host function, e.g. a
+    sum over chunks): at most ``max_steps`` Newton steps. Returns ``(state, result)``."""
+    solver = _solver(rtol, atol)
+    state, _ = _start(solver, x0)
     y = t = x0
     stop = False
     result = optx.RESULTS.successful
     for _ in range(max_steps + 1):
-        acc = zero
-        for c in chunks:
-            acc = _chunk_pass(nll, t, scale, c, acc)
-        y, state, t, go, stop, result = _update(solver, y, state, t, *acc)
+        y, state, t, go, stop, result = _update(solver, y, state, t, *pass_fn(t))
         if not bool(go):
             break
     if not bool(stop) and bool(result == optx.RESULTS.successful):
