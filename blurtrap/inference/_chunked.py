@@ -18,12 +18,16 @@ is all 0 (bucket padding) add exactly 0 and are skipped, so the padding costs no
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._bound_errors import _natural_hessian_jit, bound_units, cov_from_hessian
 from ._newton import SafeguardedNewton
+from ._nodes import use_nodes
 from ._problems import SpectralArgs, SpectralObjective
 from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applies
 
@@ -37,10 +41,38 @@ HOST_NEWTON = True
 
 
 def chunked_applies(nll, args) -> bool:
-    """The chunked fit applies: the Whittle objective of the closed-form expected periodogram
-    with no effects (the fused pass), with chunking on."""
-    return (CHUNK is not None and isinstance(nll, SpectralObjective)
-            and isinstance(args, SpectralArgs) and _fused_pass_applies(args))
+    """The chunked fit applies: the Whittle objective (:class:`._problems.SpectralObjective`)
+    of a model whose spectrum can be evaluated chunk by chunk (:func:`args_chunkable`), with
+    chunking on."""
+    return isinstance(nll, SpectralObjective) and args_chunkable(args)
+
+
+def args_chunkable(args) -> bool:
+    """The objective on ``args`` is a sum over ordinates whose model spectrum at each one
+    can be evaluated from a chunk of them: the closed-form core model (fused pass), any
+    model whose spectrum at an ordinate depends on that frequency alone (closed forms with
+    additive or relation effects: drift, line noise, heating ...; unaliased models; the
+    exact fold), and a model folded on nodes (:mod:`._nodes`) where the whole record uses
+    nodes too (each chunk then carries the record's frequency span, :func:`_spans_nodes`).
+    Decided from static fields and shapes only."""
+    if CHUNK is None or not isinstance(args, SpectralArgs):
+        return False
+    if _fused_pass_applies(args):
+        return True
+    m = args.model
+    if m.closed_form or not m.alias:
+        return True
+    # folded: on nodes (whole record and chunks alike) or by the exact sum at each ordinate
+    return use_nodes(args.f, m.fold_nodes) == use_nodes(np.empty((1, CHUNK)), m.fold_nodes)
+
+
+def _spans_nodes(args: SpectralArgs) -> bool:
+    """The model spectrum is folded on nodes spanning each row's frequencies: every chunk
+    then carries two more ordinates at weight 0, the row's smallest positive and its largest
+    |f|, so that its nodes are the whole record's (and so is every interpolated value)."""
+    m = args.model
+    return (not _fused_pass_applies(args) and m.alias and not m.closed_form
+            and use_nodes(args.f, m.fold_nodes))
 
 
 def _with_ordinates(args: SpectralArgs, f, s2, power, weight) -> SpectralArgs:
@@ -53,15 +85,31 @@ def _pad_to(z, size, mode):
     return np.pad(z, [(0, 0)] * (z.ndim - 1) + [(0, size - z.shape[-1])], mode=mode)
 
 
+def ordinate_step(args: SpectralArgs) -> int:
+    """Real ordinates per chunk: :data:`CHUNK` (the padded length with chunking off), less
+    the two span ordinates where the chunks carry them (:func:`_spans_nodes`)."""
+    if CHUNK is None:
+        return int(args.f.shape[-1])
+    return CHUNK - 2 if _spans_nodes(args) else CHUNK
+
+
 def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
-    """``args`` cut along the ordinates into consecutive pieces of exactly :data:`CHUNK`, the
-    last one (or the only one) padded with copies of the last ordinate at weight 0, so that
-    every piece has the same shape whatever the record length; with ``skip_empty`` the
-    pieces whose weight is all 0 are left out (they add exactly 0 to every sum), keeping at
-    least one."""
+    """``args`` cut along the ordinates into consecutive pieces of :func:`ordinate_step`
+    ordinates, the last one (or the only one) padded with copies of the last ordinate at
+    weight 0 (and, for a spectrum folded on nodes, two span ordinates at weight 0 appended),
+    so that every piece has the same shape, :data:`CHUNK` wide, whatever the record length;
+    with ``skip_empty`` the pieces whose weight is all 0 are left out (they add exactly 0 to
+    every sum), keeping at least one."""
     f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
     m = f.shape[-1]
-    size = m if CHUNK is None else CHUNK
+    size = ordinate_step(args)
+    span = None
+    if _spans_nodes(args):
+        af = np.abs(f)
+        lo = np.min(np.where(af > 0, af, np.inf), axis=-1, keepdims=True)
+        span = np.concatenate([lo, np.max(af, axis=-1, keepdims=True)], axis=-1)
+        dt = np.asarray(args.meta.dt, float).reshape(-1, 1) * np.ones((f.shape[0], 1))
+        span_s2 = np.sin(np.pi * span * dt) ** 2
     out = []
     for i in range(0, m, size):
         sl = slice(i, min(i + size, m))
@@ -69,8 +117,20 @@ def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
             continue
         fc, s2c, pwc, wtc = (_pad_to(z[..., sl], size, mode) for z, mode in
                              ((f, "edge"), (s2, "edge"), (pw, "edge"), (wt, "constant")))
+        if span is not None:
+            fc, s2c = np.concatenate([fc, span], -1), np.concatenate([s2c, span_s2], -1)
+            pwc = np.concatenate([pwc, pwc[..., -2:]], -1)
+            wtc = np.concatenate([wtc, np.zeros_like(wtc[..., :2])], -1)
         out.append(_with_ordinates(args, fc, s2c, pwc, wtc))
     return out
+
+
+def model_psd_in_chunks(kernel, p, args: SpectralArgs):
+    """``kernel(p, chunk)`` (the model spectrum of a chunk) for every chunk of ``args``,
+    put together: the spectrum on all of ``args``' ordinates, shape (R, M), numpy."""
+    step = ordinate_step(args)
+    parts = [np.asarray(kernel(p, c))[..., :step] for c in ordinate_chunks(args, False)]
+    return np.concatenate(parts, axis=-1)[..., :args.f.shape[-1]]
 
 
 def binned_ordinates(args: SpectralArgs, width: int) -> SpectralArgs:
@@ -97,7 +157,7 @@ def coarse_chunks(args: SpectralArgs) -> list[SpectralArgs] | None:
     """The chunks of the coarse start-value objective (the grouping of
     :func:`._whittle_pass.spectral_newton_plan`), or None where it has none."""
     width = min(_COARSE_MAX_WIDTH, args.power.shape[-1] // _COARSE_GROUPS)
-    if width < 2:
+    if width < 2 or not _fused_pass_applies(args):
         return None
     return ordinate_chunks(binned_ordinates(args, width))
 
@@ -168,3 +228,21 @@ def host_newton_loop(pass_fn, x0, rtol, atol, max_steps):
     if not bool(stop) and bool(result == optx.RESULTS.successful):
         result = optx.RESULTS.nonlinear_max_steps_reached
     return state, result
+
+
+def release_bound_chunks(nll, scale, args, out):
+    """:func:`._bound_errors.release_bound` (autodiff Hessian) of ``nll`` on ``args`` with
+    the natural-parameter Hessian summed over the ordinate chunks: with a parameter at its
+    bound (eps^2, a drift diffusion ... -> 0) the others' errors are the unconstrained ones,
+    and a new record length compiles no Hessian program."""
+    if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
+        return out
+    at_bound = np.asarray(out.at_bound, bool)
+    s = bound_units(np.asarray(scale), np.asarray(out.value), at_bound)
+    value, s_j, bound_j = jnp.asarray(out.value), jnp.asarray(s), jnp.asarray(at_bound)
+    h = sum(np.asarray(_natural_hessian_jit(nll, value, c, s_j, bound_j, False))
+            for c in ordinate_chunks(args))
+    cov, pd = cov_from_hessian(h, s, at_bound)
+    new = jnp.asarray(cov) if bool(pd) else out.cov
+    return dataclasses.replace(out, cov=new, cov_given_bound=out.cov,
+                               conditional=jnp.asarray(not bool(pd)))
