@@ -40,10 +40,26 @@ CHUNK: int | None = 1 << 14
 HOST_NEWTON = True
 
 
+#: models with effects (autodiff pass) also run their Newton loop in ordinate chunks on the
+#: host. Off by default: a new length then compiles nothing, but each warm fit is ~5x slower
+#: (standard+drift at 62 739 frames: 2.0 s against 0.39 s, 58 steps of 40 ms against 5 ms:
+#: the single compiled loop keeps the data-only work of the autodiff pass out of the loop,
+#: benchmarks/RESULTS.md "Session 12"); the Hessian at a bound and the fitted spectrum
+#: (one-shot evaluations) are chunked for them either way
+EFFECTS = False
+
+
 def chunked_applies(nll, args) -> bool:
-    """The chunked fit applies: the Whittle objective (:class:`._problems.SpectralObjective`)
-    of a model whose spectrum can be evaluated chunk by chunk (:func:`args_chunkable`), with
-    chunking on."""
+    """The chunked Newton fit applies: the Whittle objective
+    (:class:`._problems.SpectralObjective`) of the closed-form core model (fused pass), or,
+    with :data:`EFFECTS`, of a model whose spectrum can be evaluated chunk by chunk
+    (:func:`args_chunkable`); chunking on."""
+    return objective_chunkable(nll, args) and (EFFECTS or _fused_pass_applies(args))
+
+
+def objective_chunkable(nll, args) -> bool:
+    """``nll`` is the Whittle objective and ``args`` can be evaluated in ordinate chunks
+    (:func:`args_chunkable`): its sums (value, gradient, Hessian) are sums over chunks."""
     return isinstance(nll, SpectralObjective) and args_chunkable(args)
 
 

@@ -306,8 +306,8 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     lands on a non-minimum) BFGS takes over, compiled only when needed. The Whittle
     objective runs the same iteration in fixed-size ordinate chunks with the loop on the host
     (:func:`_chunked_newton`: a new record length compiles nothing), with the fused pass for
-    the core model and autodiff of each chunk's sum for models with effects
-    (:func:`._chunked.args_chunkable` says where). ``nll`` must be a
+    the core model, and with ``_chunked.EFFECTS`` autodiff of each chunk's sum for models
+    with effects (:func:`._chunked.args_chunkable` says where). ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
@@ -322,7 +322,8 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
     if not release:
         return out
-    if chunked:  # the natural-parameter Hessian at a bound summed over the same chunks
+    if _chunked.objective_chunkable(nll, args):
+        # the natural-parameter Hessian at a bound summed over ordinate chunks
         return release_bound_chunks(nll, scale, args, out)
     return release_bound(nll, scale, args, out)
 

@@ -303,10 +303,14 @@ def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
     np.testing.assert_allclose(psd, want, rtol=1e-12, atol=0)
 
 
-def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch):
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, effects):
     """standard+drift on two recordings (drift at its bound 0: the errors from the
-    natural-parameter Hessian summed over the chunks): the chunked host-Newton fit gives the
-    estimates (1e-10), errors (1e-8) and goodness of fit of the single compiled loop."""
+    natural-parameter Hessian summed over the chunks): the chunked host-Newton fit
+    (``_chunked.EFFECTS``), and by default the compiled loop with that Hessian and the
+    fitted spectrum in chunks, give the estimates (1e-10), errors (1e-8) and goodness of fit
+    of everything on the whole padded ordinates (``_chunked.CHUNK = None``)."""
+    monkeypatch.setattr(_chunked, "EFFECTS", effects)
     data = bt.RecordingSet([rec(frames(n, 45 + i)) for i, n in enumerate((40_000, 70_000))])
     out = {}
     for chunk in (_chunked.CHUNK, None):
@@ -321,13 +325,16 @@ def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch):
     assert abs(a.gof["statistic"] / b.gof["statistic"] - 1) < 1e-10
 
 
-def test_new_length_with_effects_compiles_no_fit_program(compiles, monkeypatch):
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+def test_new_length_with_effects_compiles_no_fit_program(compiles, monkeypatch, effects):
     """After a first standard+drift calibration, a recording in a new bucket compiles none
-    of the fit's programs (Newton loop, Hessian at the bound, fitted spectrum); with the
-    chunks off it compiles them again (the check can fail)."""
+    of the fit's programs (Newton loop, Hessian at the bound, fitted spectrum) with the
+    Newton loop in chunks (``_chunked.EFFECTS``), and neither the Hessian at the bound nor
+    the spectrum by default; with the chunks off it compiles them again (can fail)."""
+    monkeypatch.setattr(_chunked, "EFFECTS", effects)
     y = frames(150_000, 59)  # drift at its bound 0 in every fit below
-    fit_programs = ("_chunk_pass", "_update", "_start", "_finish", "_newton",
-                    "spectral_model_psd", "natural_hessian")
+    fit_programs = ("spectral_model_psd", "natural_hessian") + (
+        ("_chunk_pass", "_update", "_start", "_finish", "_newton") if effects else ())
     for chunk, expect_none in ((_chunked.CHUNK, True), (None, False)):
         monkeypatch.setattr(_chunked, "CHUNK", chunk)
         jax.clear_caches()
