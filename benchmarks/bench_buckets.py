@@ -3,14 +3,19 @@
 ``calibrate`` pads the periodogram ordinates (spectral fits) and the frames (exact
 likelihood) to bucket lengths (``_problems.bucket_length``: powers of two by default),
 so recordings of nearby lengths share compiled programs; the default Whittle fit runs in
-fixed-size ordinate chunks with its Newton loop on the host (``inference/_chunked.py``), so
-a new length compiles none of its programs at all. In one fresh process per tree this
+fixed-size ordinate chunks with its Newton loop on the host (``inference/_chunked.py``;
+models with effects only with ``_chunked.EFFECTS``: by default only their Hessian at a bound
+and fitted spectrum are chunked), and the exact
+likelihood's pass runs in fixed-size frame chunks (``inference/_exact_chunks.py``), so a new
+length compiles none of their programs at all. In one fresh process per tree this
 script calibrates a first recording (compiles), repeats it (warm time), then calibrates
 ``--count`` recordings of other lengths and reports, per new length, the time minus the warm
 time of a recording of that size (the warm time is measured on each recording by a second
 call). Two cases: 50 000-70 000 frames (default likelihood: Whittle) and 3000-5000 frames
-with ``likelihood="exact"`` (``--cases 0,1``, the default), and 40 000-1 100 000 frames
-(Whittle, ``--cases 2``: many buckets). No persistent compilation cache is enabled.
+with ``likelihood="exact"`` (``--cases 0,1``, the default), 40 000-1 100 000 frames
+(Whittle, ``--cases 2``: many buckets), and a model with an effect, ``standard+drift``
+(Whittle with the autodiff pass, 50 000-70 000 frames, ``--cases 3``). No persistent
+compilation cache is enabled.
 
 Run: ``python benchmarks/bench_buckets.py [--base DIR] [--count 10]`` where ``DIR`` holds
 another tree of the package (e.g. ``git worktree add --detach DIR main``); each tree runs in
@@ -54,7 +59,9 @@ print(json.dumps({"lengths": lengths, "first": first, "warm_first": warm0,
 
 CASES = [("default (Whittle), 50 000-70 000 frames", 50_000, 70_000, {}),
          ("exact, 3000-5000 frames", 3000, 5000, {"likelihood": "exact"}),
-         ("default (Whittle), 40 000-1 100 000 frames", 40_000, 1_100_000, {})]
+         ("default (Whittle), 40 000-1 100 000 frames", 40_000, 1_100_000, {}),
+         ("standard+drift (Whittle, autodiff pass), 50 000-70 000 frames", 50_000, 70_000,
+          {"model": "standard+drift"})]
 
 
 def run_tree(path, lo, hi, count, kw, steps="default"):

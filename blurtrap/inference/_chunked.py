@@ -18,12 +18,16 @@ is all 0 (bucket padding) add exactly 0 and are skipped, so the padding costs no
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._bound_errors import _natural_hessian_jit, bound_units, cov_from_hessian
 from ._newton import SafeguardedNewton
+from ._nodes import use_nodes
 from ._problems import SpectralArgs, SpectralObjective
 from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applies
 
@@ -31,15 +35,60 @@ from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applie
 #: Newton loop per padded length, the previous behaviour)
 CHUNK: int | None = 1 << 14
 #: the exact (finite-difference Newton) fits also run their loop on the host, so that only
-#: their pass is compiled per padded length; False: one compiled loop (the previous way)
+#: their pass depends on the length (the exact likelihood's pass in fixed frame chunks:
+#: ``_exact_chunks``); False: one compiled loop (the previous way)
 HOST_NEWTON = True
 
 
+#: models with effects (autodiff pass) also run their Newton loop in ordinate chunks on the
+#: host. Off by default: a new length then compiles nothing, but each warm fit is ~5x slower
+#: (standard+drift at 62 739 frames: 2.0 s against 0.39 s, 58 steps of 40 ms against 5 ms:
+#: the single compiled loop keeps the data-only work of the autodiff pass out of the loop,
+#: benchmarks/RESULTS.md "Session 12"); the Hessian at a bound and the fitted spectrum
+#: (one-shot evaluations) are chunked for them either way
+EFFECTS = False
+
+
 def chunked_applies(nll, args) -> bool:
-    """The chunked fit applies: the Whittle objective of the closed-form expected periodogram
-    with no effects (the fused pass), with chunking on."""
-    return (CHUNK is not None and isinstance(nll, SpectralObjective)
-            and isinstance(args, SpectralArgs) and _fused_pass_applies(args))
+    """The chunked Newton fit applies: the Whittle objective
+    (:class:`._problems.SpectralObjective`) of the closed-form core model (fused pass), or,
+    with :data:`EFFECTS`, of a model whose spectrum can be evaluated chunk by chunk
+    (:func:`args_chunkable`); chunking on."""
+    return objective_chunkable(nll, args) and (EFFECTS or _fused_pass_applies(args))
+
+
+def objective_chunkable(nll, args) -> bool:
+    """``nll`` is the Whittle objective and ``args`` can be evaluated in ordinate chunks
+    (:func:`args_chunkable`): its sums (value, gradient, Hessian) are sums over chunks."""
+    return isinstance(nll, SpectralObjective) and args_chunkable(args)
+
+
+def args_chunkable(args) -> bool:
+    """The objective on ``args`` is a sum over ordinates whose model spectrum at each one
+    can be evaluated from a chunk of them: the closed-form core model (fused pass), any
+    model whose spectrum at an ordinate depends on that frequency alone (closed forms with
+    additive or relation effects: drift, line noise, heating ...; unaliased models; the
+    exact fold), and a model folded on nodes (:mod:`._nodes`) where the whole record uses
+    nodes too (each chunk then carries the record's frequency span, :func:`_spans_nodes`).
+    Decided from static fields and shapes only."""
+    if CHUNK is None or not isinstance(args, SpectralArgs):
+        return False
+    if _fused_pass_applies(args):
+        return True
+    m = args.model
+    if m.closed_form or not m.alias:
+        return True
+    # folded: on nodes (whole record and chunks alike) or by the exact sum at each ordinate
+    return use_nodes(args.f, m.fold_nodes) == use_nodes(np.empty((1, CHUNK)), m.fold_nodes)
+
+
+def _spans_nodes(args: SpectralArgs) -> bool:
+    """The model spectrum is folded on nodes spanning each row's frequencies: every chunk
+    then carries two more ordinates at weight 0, the row's smallest positive and its largest
+    |f|, so that its nodes are the whole record's (and so is every interpolated value)."""
+    m = args.model
+    return (not _fused_pass_applies(args) and m.alias and not m.closed_form
+            and use_nodes(args.f, m.fold_nodes))
 
 
 def _with_ordinates(args: SpectralArgs, f, s2, power, weight) -> SpectralArgs:
@@ -52,15 +101,31 @@ def _pad_to(z, size, mode):
     return np.pad(z, [(0, 0)] * (z.ndim - 1) + [(0, size - z.shape[-1])], mode=mode)
 
 
+def ordinate_step(args: SpectralArgs) -> int:
+    """Real ordinates per chunk: :data:`CHUNK` (the padded length with chunking off), less
+    the two span ordinates where the chunks carry them (:func:`_spans_nodes`)."""
+    if CHUNK is None:
+        return int(args.f.shape[-1])
+    return CHUNK - 2 if _spans_nodes(args) else CHUNK
+
+
 def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
-    """``args`` cut along the ordinates into consecutive pieces of exactly :data:`CHUNK`, the
-    last one (or the only one) padded with copies of the last ordinate at weight 0, so that
-    every piece has the same shape whatever the record length; with ``skip_empty`` the
-    pieces whose weight is all 0 are left out (they add exactly 0 to every sum), keeping at
-    least one."""
+    """``args`` cut along the ordinates into consecutive pieces of :func:`ordinate_step`
+    ordinates, the last one (or the only one) padded with copies of the last ordinate at
+    weight 0 (and, for a spectrum folded on nodes, two span ordinates at weight 0 appended),
+    so that every piece has the same shape, :data:`CHUNK` wide, whatever the record length;
+    with ``skip_empty`` the pieces whose weight is all 0 are left out (they add exactly 0 to
+    every sum), keeping at least one."""
     f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
     m = f.shape[-1]
-    size = m if CHUNK is None else CHUNK
+    size = ordinate_step(args)
+    span = None
+    if _spans_nodes(args):
+        af = np.abs(f)
+        lo = np.min(np.where(af > 0, af, np.inf), axis=-1, keepdims=True)
+        span = np.concatenate([lo, np.max(af, axis=-1, keepdims=True)], axis=-1)
+        dt = np.asarray(args.meta.dt, float).reshape(-1, 1) * np.ones((f.shape[0], 1))
+        span_s2 = np.sin(np.pi * span * dt) ** 2
     out = []
     for i in range(0, m, size):
         sl = slice(i, min(i + size, m))
@@ -68,8 +133,20 @@ def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
             continue
         fc, s2c, pwc, wtc = (_pad_to(z[..., sl], size, mode) for z, mode in
                              ((f, "edge"), (s2, "edge"), (pw, "edge"), (wt, "constant")))
+        if span is not None:
+            fc, s2c = np.concatenate([fc, span], -1), np.concatenate([s2c, span_s2], -1)
+            pwc = np.concatenate([pwc, pwc[..., -2:]], -1)
+            wtc = np.concatenate([wtc, np.zeros_like(wtc[..., :2])], -1)
         out.append(_with_ordinates(args, fc, s2c, pwc, wtc))
     return out
+
+
+def model_psd_in_chunks(kernel, p, args: SpectralArgs):
+    """``kernel(p, chunk)`` (the model spectrum of a chunk) for every chunk of ``args``,
+    put together: the spectrum on all of ``args``' ordinates, shape (R, M), numpy."""
+    step = ordinate_step(args)
+    parts = [np.asarray(kernel(p, c))[..., :step] for c in ordinate_chunks(args, False)]
+    return np.concatenate(parts, axis=-1)[..., :args.f.shape[-1]]
 
 
 def binned_ordinates(args: SpectralArgs, width: int) -> SpectralArgs:
@@ -96,7 +173,7 @@ def coarse_chunks(args: SpectralArgs) -> list[SpectralArgs] | None:
     """The chunks of the coarse start-value objective (the grouping of
     :func:`._whittle_pass.spectral_newton_plan`), or None where it has none."""
     width = min(_COARSE_MAX_WIDTH, args.power.shape[-1] // _COARSE_GROUPS)
-    if width < 2:
+    if width < 2 or not _fused_pass_applies(args):
         return None
     return ordinate_chunks(binned_ordinates(args, width))
 
@@ -131,23 +208,57 @@ def _update(solver, y, state, t, v, g, h):
     return new.x, new, solver.trial(new.x, new), go, stop, result
 
 
+def _solver(rtol, atol):
+    # tolerances as arrays: one compiled update for the coarse and the full fit alike
+    return SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float))
+
+
 def host_newton_minimise(nll, scale, chunks, x0, rtol, atol, max_steps):
     """:func:`._newton.newton_minimise` of ``nll`` summed over ``chunks`` with the loop on the
     host: at most ``max_steps`` Newton steps. Returns ``(state, result)`` (the final
     :class:`._newton.NewtonState` and the ``optx.RESULTS`` of the loop)."""
-    # tolerances as arrays: one compiled update for the coarse and the full fit alike
-    solver = SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float))
-    state, zero = _start(solver, x0)
+
+    def pass_fn(t):
+        acc = zero
+        for c in chunks:
+            acc = _chunk_pass(nll, t, scale, c, acc)
+        return acc
+
+    zero = _start(_solver(rtol, atol), x0)[1]
+    return host_newton_loop(pass_fn, x0, rtol, atol, max_steps)
+
+
+def host_newton_loop(pass_fn, x0, rtol, atol, max_steps):
+    """The safeguarded Newton iteration of :func:`._newton.newton_minimise` with the loop on
+    the host and the pass ``pass_fn(x) -> (value, grad, hess)`` (any host function, e.g. a
+    sum over chunks): at most ``max_steps`` Newton steps. Returns ``(state, result)``."""
+    solver = _solver(rtol, atol)
+    state, _ = _start(solver, x0)
     y = t = x0
     stop = False
     result = optx.RESULTS.successful
     for _ in range(max_steps + 1):
-        acc = zero
-        for c in chunks:
-            acc = _chunk_pass(nll, t, scale, c, acc)
-        y, state, t, go, stop, result = _update(solver, y, state, t, *acc)
+        y, state, t, go, stop, result = _update(solver, y, state, t, *pass_fn(t))
         if not bool(go):
             break
     if not bool(stop) and bool(result == optx.RESULTS.successful):
         result = optx.RESULTS.nonlinear_max_steps_reached
     return state, result
+
+
+def release_bound_chunks(nll, scale, args, out):
+    """:func:`._bound_errors.release_bound` (autodiff Hessian) of ``nll`` on ``args`` with
+    the natural-parameter Hessian summed over the ordinate chunks: with a parameter at its
+    bound (eps^2, a drift diffusion ... -> 0) the others' errors are the unconstrained ones,
+    and a new record length compiles no Hessian program."""
+    if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
+        return out
+    at_bound = np.asarray(out.at_bound, bool)
+    s = bound_units(np.asarray(scale), np.asarray(out.value), at_bound)
+    value, s_j, bound_j = jnp.asarray(out.value), jnp.asarray(s), jnp.asarray(at_bound)
+    h = sum(np.asarray(_natural_hessian_jit(nll, value, c, s_j, bound_j, False))
+            for c in ordinate_chunks(args))
+    cov, pd = cov_from_hessian(h, s, at_bound)
+    new = jnp.asarray(cov) if bool(pd) else out.cov
+    return dataclasses.replace(out, cov=new, cov_given_bound=out.cov,
+                               conditional=jnp.asarray(not bool(pd)))

@@ -30,7 +30,15 @@ import optimistix as optx
 from . import _chunked
 from ._bound_errors import release_bound
 from ._chi2 import chi2_sf as chi2_sf
-from ._chunked import chunked_applies, coarse_chunks, host_newton_minimise, ordinate_chunks
+from ._chunked import (
+    chunked_applies,
+    coarse_chunks,
+    host_newton_loop,
+    host_newton_minimise,
+    ordinate_chunks,
+    release_bound_chunks,
+)
+from ._exact_chunks import exact_chunk_pass
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
     FdObjective,
@@ -295,21 +303,29 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     Newton on the score first (:class:`blurtrap.inference._newton.SafeguardedNewton`, with
     the objective's own value/gradient/Hessian pass when ``nll`` is an
     :class:`~blurtrap.inference._newton.AbstractObjective` that has one); if it fails (or
-    lands on a non-minimum) BFGS takes over, compiled only when needed. The default Whittle
+    lands on a non-minimum) BFGS takes over, compiled only when needed. The Whittle
     objective runs the same iteration in fixed-size ordinate chunks with the loop on the host
-    (:func:`_chunked_newton`: a new record length compiles nothing). ``nll`` must be a
+    (:func:`_chunked_newton`: a new record length compiles nothing), with the fused pass for
+    the core model, and with ``_chunked.EFFECTS`` autodiff of each chunk's sum for models
+    with effects (:func:`._chunked.args_chunkable` says where). ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False
     (a fit whose errors are not used: they stay conditional).
     """
-    if chunked_applies(nll, args):
+    chunked = chunked_applies(nll, args)
+    if chunked:
         out = _chunked_newton(nll, scale, args, rtol, atol)
     else:
         out = _newton_jit(nll, scale, args, rtol, atol)
     if not (bool(out.converged) and bool(out.hessian_pd)):
         out = _bfgs_jit(nll, scale, args, rtol, atol, max_steps)
-    return release_bound(nll, scale, args, out) if release else out
+    if not release:
+        return out
+    if _chunked.objective_chunkable(nll, args):
+        # the natural-parameter Hessian at a bound summed over ordinate chunks
+        return release_bound_chunks(nll, scale, args, out)
+    return release_bound(nll, scale, args, out)
 
 
 @eqx.filter_jit
@@ -352,16 +368,23 @@ def fit_ml_fd_newton(
     value and gradient at ``x`` and ``x +- h e_i`` in one vmapped call
     (:func:`blurtrap.inference._newton.fd_hessian_pass`). The Hessian error is O(h^2) ~ 1e-8
     relative, far below statistical error. The iteration is the safeguarded Newton of
-    :func:`fit_ml` (one compiled loop, no host round trip per iteration), at most
-    ``max_iter`` steps. The covariance is the inverse of that observed Fisher information in
-    natural parameters. Falls back to optimistix BFGS if Newton does not converge. With a
-    parameter at its bound the others' errors are the unconstrained ones
-    (:func:`._bound_errors.release_bound`, its Hessian by differences of the autodiff
-    gradient).
+    :func:`fit_ml`, at most ``max_iter`` steps, with its loop on the host
+    (``_chunked.HOST_NEWTON``; one compiled loop otherwise). The exact likelihood's pass
+    runs in fixed-size frame chunks (:mod:`._exact_chunks`: a new record length compiles
+    nothing); other objectives' pass is compiled per padded length. The covariance is the
+    inverse of that observed Fisher information in natural parameters. Falls back to
+    optimistix BFGS if Newton does not converge. With a parameter at its bound the others'
+    errors are the unconstrained ones (:func:`._bound_errors.release_bound`, its Hessian by
+    differences of the autodiff gradient).
     """
-    if _chunked.HOST_NEWTON:  # only the pass is compiled per padded length
-        st, res = host_newton_minimise(FdObjective(nll, h), scale, [args],
-                                       jnp.zeros_like(scale), tol, tol, max_iter)
+    if _chunked.HOST_NEWTON:  # loop on the host: only the pass depends on the length
+        x0 = jnp.zeros_like(scale)
+        chunked = exact_chunk_pass(nll, args, h)  # none per length: frames in fixed chunks
+        if chunked is not None:
+            st, res = host_newton_loop(lambda x: chunked(x, scale), x0, tol, tol, max_iter)
+        else:
+            st, res = host_newton_minimise(FdObjective(nll, h), scale, [args], x0, tol, tol,
+                                           max_iter)
         out = _finish_fd_jit(st, res, scale)
     else:
         out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)

@@ -35,6 +35,13 @@ _LOG2PI = 1.8378770664093453
 
 def _innovation_variances(c0, d, e, n):
     """v_1 = c0, v_t = d - e^2 / v_(t-1): closed form via p_t = d p_(t-1) - e^2 p_(t-2)."""
+    return innovation_variances_at(c0, d, e, jnp.arange(1, n + 1, dtype=c0.dtype))
+
+
+def innovation_variances_at(c0, d, e, t):
+    """The innovation variances ``v_t`` of :func:`_innovation_variances` at the frame
+    indices ``t`` (1-based, any array of them): the same closed form, so that a recursion run
+    in chunks of frames gets the same numbers as the whole record."""
     disc = jnp.sqrt(jnp.maximum(d * d - 4.0 * e * e, 0.0))
     lam1 = 0.5 * (d + disc)  # steady-state innovation variance
     lam2 = e * e / lam1  # = 0.5 (d - disc), computed without cancellation
@@ -42,7 +49,6 @@ def _innovation_variances(c0, d, e, n):
     # p_0 = 1, p_1 = c0  ->  p_t = A lam1^t + B lam2^t with A + B = 1, A lam1 + B lam2 = c0
     # v_t = p_t/p_(t-1) = lam1 (1 + g r^t) / (1 + g r^(t-1)),  g = B/A = (lam1 - c0)/(c0 - lam2)
     g = (lam1 - c0) / (c0 - lam2)
-    t = jnp.arange(1, n + 1, dtype=c0.dtype)
     log_r = jnp.log(jnp.maximum(r, jnp.finfo(c0.dtype).tiny))
     rt = jnp.exp(t * log_r)
     rt1 = jnp.exp((t - 1.0) * log_r)

@@ -12,7 +12,6 @@ import numpy as np
 from . import _chunked
 from ._fit import chi2_sf
 from ._problems import SpectralArgs, bucket_length, rec_meta, spectral_model_psd
-from ._whittle_pass import _fused_pass_applies
 
 
 def _np_periodogram(y, dt, n_blocks=1):
@@ -134,10 +133,9 @@ _psd_kernel = eqx.filter_jit(spectral_model_psd)
 
 def _psd_jit(p, args: SpectralArgs):
     """The model spectrum ``spectral_model_psd(p, args)``, shape (R, M), compiled; for the
-    closed-form core model evaluated in the fit's ordinate chunks (:mod:`._chunked`), so that
+    models the fit chunks evaluated in its ordinate chunks (:mod:`._chunked`), so that
     a new record length compiles nothing here either."""
-    if _fused_pass_applies(args) and _chunked.CHUNK is not None:
-        parts = [np.asarray(_psd_kernel(p, c)) for c in _chunked.ordinate_chunks(args, False)]
-        return jnp.asarray(np.concatenate(parts, axis=-1)[..., :args.f.shape[-1]])
+    if _chunked.args_chunkable(args):
+        return jnp.asarray(_chunked.model_psd_in_chunks(_psd_kernel, p, args))
     return _psd_kernel(p, args)
 

@@ -149,8 +149,11 @@ def test_exact_likelihood_ignores_masked_frames(buckets, mean):
 def test_new_length_in_the_same_bucket_does_not_recompile(compiles, buckets, kw, n_a, n_b,
                                                           n_c):
     """A second recording of another length in the same bucket compiles nothing; one in the
-    next bucket does (the counter can fail)."""
+    next bucket does (the counter can fail). The caches are cleared first: the exact fit
+    compiles no fit program for a new bucket (frame chunks, test_exact_chunks.py), so what
+    the next bucket compiles (eager ops at its shape) must not come from other tests."""
     buckets(True)
+    jax.clear_caches()
     ya, yb, yc = frames(n_a, 1), frames(n_b, 2, k=3e-5), frames(n_c, 3)
     bt.calibrate(rec(ya), **kw)
     compiles.reset()
@@ -259,3 +262,86 @@ def test_exact_fit_host_loop_equals_compiled_loop(monkeypatch):
     np.testing.assert_allclose(out[True].values, out[False].values, rtol=1e-10, atol=0)
     np.testing.assert_allclose(out[True].errors, out[False].errors, rtol=1e-8, atol=0)
     assert out[True].extras["loglik"] == pytest.approx(out[False].extras["loglik"], rel=1e-13)
+
+
+# ------------------------------------------------------------------------------------------
+# Models with effects in the same chunks (autodiff of each chunk's sum)
+# ------------------------------------------------------------------------------------------
+def _effect_args(model, lengths, k_mode="shared"):
+    recs = [rec(frames(n, 30 + i)) for i, n in enumerate(lengths)]
+    m = get_model(model)
+    layout = make_layout(recs, k_mode, True, tuple(p.name for p in m.extra_params))
+    return _spectral_args(recs, layout, m, 1, None)
+
+
+@pytest.mark.parametrize("model, spans", [("standard+drift", False),
+                                          ("standard+hydrodynamics", True)])
+def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
+    """For a model with effects the chunks' autodiff value, gradient and Hessian, summed,
+    equal autodiff of the objective on all ordinates at once, to 1e-11: pointwise spectra
+    (drift) and a spectrum folded on nodes spanning the record (hydrodynamics: each chunk
+    carries the record's frequency span; without it the nodes would follow the chunk)."""
+    a = _effect_args(model, (40_000, 23_000), "per_recording")
+    assert _chunked.args_chunkable(a) and _chunked._spans_nodes(a) == spans
+    chunks = _chunked.ordinate_chunks(a)
+    assert len(chunks) == 2 and all(c.f.shape == (2, 16384) for c in chunks)
+    n = len(a.layout.names)
+    scale = jnp.asarray([2.1e-5, 1.9e-5, 1.05 * GAMMA, 5e-18] + [1e-20] * (n - 4))
+    if model.endswith("hydrodynamics"):
+        scale = scale.at[4:].set(1.5e-6)
+    x = jnp.asarray(np.linspace(0.03, -0.02, n))
+    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
+    for c in chunks:
+        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
+    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
+    for got, want in zip(acc, ref):
+        got, want = np.asarray(got), np.asarray(want)
+        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+    psd = _chunked.model_psd_in_chunks(eqx.filter_jit(_problems.spectral_model_psd),
+                                       jnp.asarray(scale * np.exp(x)), a)
+    want = np.asarray(_problems.spectral_model_psd(scale * jnp.exp(x), a))
+    np.testing.assert_allclose(psd, want, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, effects):
+    """standard+drift on two recordings (drift at its bound 0: the errors from the
+    natural-parameter Hessian summed over the chunks): the chunked host-Newton fit
+    (``_chunked.EFFECTS``), and by default the compiled loop with that Hessian and the
+    fitted spectrum in chunks, give the estimates (1e-10), errors (1e-8) and goodness of fit
+    of everything on the whole padded ordinates (``_chunked.CHUNK = None``)."""
+    monkeypatch.setattr(_chunked, "EFFECTS", effects)
+    data = bt.RecordingSet([rec(frames(n, 45 + i)) for i, n in enumerate((40_000, 70_000))])
+    out = {}
+    for chunk in (_chunked.CHUNK, None):
+        monkeypatch.setattr(_chunked, "CHUNK", chunk)
+        out[chunk] = bt.calibrate(data, model="standard+drift", k="per_recording",
+                                  likelihood="whittle")
+    a, b = out[None], out[_chunked.CHUNK or 16384]
+    assert a.converged and b.converged and a.param_names == b.param_names
+    assert np.isnan(a.errors[-1])  # drift at its bound: the unconstrained errors were used
+    np.testing.assert_allclose(b.values, a.values, rtol=1e-10, atol=1e-30)
+    np.testing.assert_allclose(b.errors, a.errors, rtol=1e-8, atol=0)
+    assert abs(a.gof["statistic"] / b.gof["statistic"] - 1) < 1e-10
+
+
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+def test_new_length_with_effects_compiles_no_fit_program(compiles, monkeypatch, effects):
+    """After a first standard+drift calibration, a recording in a new bucket compiles none
+    of the fit's programs (Newton loop, Hessian at the bound, fitted spectrum) with the
+    Newton loop in chunks (``_chunked.EFFECTS``), and neither the Hessian at the bound nor
+    the spectrum by default; with the chunks off it compiles them again (can fail)."""
+    monkeypatch.setattr(_chunked, "EFFECTS", effects)
+    y = frames(150_000, 59)  # drift at its bound 0 in every fit below
+    fit_programs = ("spectral_model_psd", "natural_hessian") + (
+        ("_chunk_pass", "_update", "_start", "_finish", "_newton") if effects else ())
+    for chunk, expect_none in ((_chunked.CHUNK, True), (None, False)):
+        monkeypatch.setattr(_chunked, "CHUNK", chunk)
+        jax.clear_caches()
+        first = bt.calibrate(rec(y[:40_000]), model="standard+drift")
+        compiles.reset()
+        res = bt.calibrate(rec(y[:150_000]), model="standard+drift")
+        assert np.isnan(first.errors[-1]) and np.isnan(res.errors[-1])  # Hessian at bound
+        assert res.converged and abs(res.k / 2e-5 - 1) < 5 * res.k_err / 2e-5
+        got = [n for n in compiles.names if any(p in n for p in fit_programs)]
+        assert (got == []) == expect_none, compiles.names

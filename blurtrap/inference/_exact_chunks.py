@@ -1,0 +1,223 @@
+"""The exact (innovations) likelihood's Newton pass in fixed-size frame chunks, so that a
+recording of a new length compiles nothing once a first one was fitted.
+
+The finite-difference Newton fit of the exact likelihood (:func:`._fit.fit_ml_fd_newton`)
+needs, per step, the value and gradient of ``exact_nll`` at ``x`` and ``x +- h e_i``
+(:func:`._newton.fd_hessian_pass`). Compiled on the whole (bucket-padded) frame array, that
+pass was one XLA program per power-of-two bucket (1.5-4 s each, benchmarks/RESULTS.md "Shape
+buckets"). Here the recursion of :func:`._likelihood.arma_loglik` runs over consecutive
+chunks of exactly :data:`FRAME_CHUNK` frames with its state carried from chunk to chunk (the
+previous innovation of the frame series and of the constant series, and the running sums
+``sum log v``, ``y'S^-1 y``, ``1'S^-1 y``, ``1'S^-1 1``); the innovation variances are the
+same closed form at the chunk's global frame indices, and the differencing
+``w_t = y_t - rho y_(t-1)`` reads the frame before the chunk. Derivatives are forward mode:
+per recording the log-likelihood depends on the parameters only through its three moments
+``(C(0), C(1), rho)``, so the chunk program propagates three tangent directions of the carry
+(:func:`jax.jvp`), and one small program turns the sums into the log-likelihood, its
+gradient in ``(C(0), C(1), rho)`` and, by the chain rule through the moments, the value,
+gradient and difference Hessian of the objective in ``x``, exactly as
+:func:`._newton.fd_hessian_pass` assembles them. Only the chunk program touches the frames,
+and its shapes are (points, recordings, ``FRAME_CHUNK + 1``): a new record length reuses it.
+Chunks past every recording's last frame are not run; a partly filled last chunk has mask 0
+on its padding, which adds exactly 0 (the recursion is causal).
+
+Applies to ``exact_nll`` on :class:`._problems.ExactArgs` and to its reduced objective with
+held parameters (``calibrate(..., fixed=...)``); anything else keeps the compiled pass.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._likelihood import _LOG2PI, _affine_scan, innovation_variances_at
+from ._problems import ExactArgs, exact_nll
+
+#: frames per chunk (a power of two); ``None`` turns the chunked pass off (one compiled pass
+#: per bucket-padded length, the previous behaviour)
+FRAME_CHUNK: int | None = 1 << 12
+#: the carried state per point and recording: previous innovation of the frames and of the
+#: constant series, sum of log v, y'S^-1 y, 1'S^-1 y, 1'S^-1 1 (sums over real frames)
+_N_CARRY = 6
+
+
+class FrameChunk(eqx.Module):
+    """One chunk of frames of R recordings: the frame before it, then its frames."""
+
+    y: jax.Array  # (R, FRAME_CHUNK + 1): centred frames (mean != "zero"), 0 on padding
+    m: jax.Array  # (R, FRAME_CHUNK + 1): 1 on real frames, 0 before the first and on padding
+    t0: jax.Array  # frames before the chunk (float scalar: one program for every chunk)
+
+
+def frame_chunks(a: ExactArgs, size: int) -> list[FrameChunk]:
+    """The frames of ``a`` cut into consecutive chunks of ``size`` (the last padded with
+    mask 0; the bucket padding after every recording's last frame left out). For the
+    profiled and restricted means the frames are centred on their mean first (on the host, as
+    :func:`._likelihood.arma_loglik` does in the graph: both are shift-invariant)."""
+    ys, mask = np.asarray(a.ys, dtype=float), np.asarray(a.mask, dtype=float)
+    if a.mean != "zero":
+        n = np.sum(mask, axis=-1, keepdims=True)
+        ys = (ys - np.sum(mask * ys, axis=-1, keepdims=True) / n) * mask
+    real = np.flatnonzero(np.any(mask != 0, axis=0))
+    n_used = int(real[-1]) + 1 if real.size else 1
+    n_chunks = -(-n_used // size)
+    width = n_chunks * size + 1  # a zero column first: "the frame before" the first chunk
+    y = np.zeros((ys.shape[0], width))
+    m = np.zeros((ys.shape[0], width))
+    y[:, 1:n_used + 1], m[:, 1:n_used + 1] = ys[:, :n_used], mask[:, :n_used]
+    return [FrameChunk(y=jnp.asarray(y[:, i * size:(i + 1) * size + 1]),
+                       m=jnp.asarray(m[:, i * size:(i + 1) * size + 1]),
+                       t0=jnp.asarray(float(i * size)))
+            for i in range(n_chunks)]
+
+
+def _step(theta, carry, y, m, t0, mean):
+    """The carry after one chunk (frames ``y``, mask ``m``, the frame before first) of one
+    recording with moments ``theta = (C(0), C(1), rho)``: the recursion of
+    :func:`._likelihood._whiten` continued from the carried innovations."""
+    c0, c1, rho = theta[0], theta[1], theta[2]
+    size = y.shape[-1] - 1
+    d = c0 * (1.0 + rho * rho) - 2.0 * rho * c1
+    e = c1 - rho * c0
+    t = t0 + jnp.arange(0, size + 1, dtype=c0.dtype)  # the frame before, then the chunk's
+    v_all = innovation_variances_at(c0, d, e, jnp.maximum(t, 1.0))
+    v = v_all[1:]
+    theta_t = jnp.where(t[1:] == 1.0, 0.0, e / v_all[:-1])
+    zero = mean == "zero"
+    series = y[None] if zero else jnp.stack([y, m])
+    w = series[:, 1:] - rho * series[:, :-1]
+    n_s = series.shape[0]
+    w = w.at[:, 0].add(-theta_t[0] * carry[:n_s])  # x_0 = the carried innovation
+    eps = _affine_scan(jnp.broadcast_to(-theta_t, w.shape), w)
+    mk = m[1:]
+    wv = mk / v
+    ey = eps[0]
+    e1_last, s1y, s11 = carry[1], carry[4], carry[5]
+    if not zero:
+        e1 = eps[1]
+        e1_last = e1[-1]
+        s1y = s1y + jnp.sum(e1 * ey * wv)
+        s11 = s11 + jnp.sum(e1 * e1 * wv)
+    return jnp.stack([ey[-1], e1_last, carry[2] + jnp.sum(mk * jnp.log(v)),
+                      carry[3] + jnp.sum(ey * ey * wv), s1y, s11])
+
+
+def _loglik(carry, n, mean):
+    """The log-likelihood of :func:`._likelihood.arma_loglik` from the final carry (``n``
+    real frames)."""
+    slogv, syy, s1y, s11 = carry[2], carry[3], carry[4], carry[5]
+    if mean == "zero":
+        return -0.5 * (n * _LOG2PI + slogv + syy)
+    ll = -0.5 * (n * _LOG2PI + slogv + (syy - s1y * s1y / s11))
+    if mean == "reml":
+        ll = ll - 0.5 * jnp.log(s11) + 0.5 * _LOG2PI
+    return ll
+
+
+def _with_tangents(fn, theta, carry, dcarry):
+    """``fn(theta, carry)`` and its derivative along each of the three directions of
+    ``theta`` (the carry's own tangents ``dcarry`` (3, ...) along with them)."""
+    eye = jnp.eye(theta.shape[-1], dtype=theta.dtype)
+    out, dout = jax.vmap(lambda dt, dc: jax.jvp(fn, (theta, carry), (dt, dc)))(eye, dcarry)
+    return out[0], dout
+
+
+@eqx.filter_jit
+def _chunk_jvp(theta, carry, dcarry, chunk: FrameChunk, mean: str):
+    """Carries and their tangents after ``chunk``: ``theta`` (P, R, 3) at P points,
+    ``carry`` (P, R, 6), ``dcarry`` (P, R, 3, 6)."""
+
+    def one(th, ca, dca, y, m):
+        return _with_tangents(lambda a, b: _step(a, b, y, m, chunk.t0, mean), th, ca, dca)
+
+    per_rec = jax.vmap(one, in_axes=(0, 0, 0, 0, 0))
+    return jax.vmap(per_rec, in_axes=(0, 0, 0, None, None))(theta, carry, dcarry, chunk.y,
+                                                             chunk.m)
+
+
+def _moments(x, scale, small: ExactArgs, held):
+    """``(C(0), C(1), rho)`` per recording, shape (R, 3), at ``p = scale exp(x)`` (the held
+    parameters inserted where ``held = (full, free)``), as in ``exact_nll``."""
+    p = scale * jnp.exp(x)
+    if held is not None:
+        full, free = held
+        p = full.at[jnp.asarray(free)].set(p)
+    k_rec, gamma, eps2 = small.layout.unpack(p)
+    c0, c1, rho = small.model.moments(k_rec, gamma, eps2, small.meta.dt, small.meta.w,
+                                      small.meta.temp)
+    return jnp.stack(jnp.broadcast_arrays(c0, c1, rho), axis=-1)
+
+
+def _points(x, h):
+    """``x`` and ``x +- h e_i`` (the points of :func:`._newton.fd_hessian_pass`)."""
+    eye = jnp.eye(x.shape[0], dtype=x.dtype) * h
+    return jnp.concatenate([x[None], x[None] + eye, x[None] - eye])
+
+
+@eqx.filter_jit
+def _start(x, scale, small, held, h):
+    """The moments at every point and the zero carries."""
+    theta = jax.vmap(_moments, in_axes=(0, None, None, None))(_points(x, h), scale, small, held)
+    p, r = theta.shape[:2]
+    return theta, jnp.zeros((p, r, _N_CARRY), x.dtype), jnp.zeros((p, r, 3, _N_CARRY), x.dtype)
+
+
+@eqx.filter_jit
+def _finish(x, scale, small, held, h, carry, dcarry, n_frames):
+    """Value, gradient and difference Hessian of ``exact_nll(scale exp(x))`` from the final
+    carries (as :func:`._newton.fd_hessian_pass` assembles them)."""
+    mean = small.mean
+
+    def ll_rec(ca, dca, n):
+        ll, dll = _with_tangents(lambda th, c: _loglik(c, n, mean), jnp.zeros(3, ca.dtype),
+                                 ca, dca)
+        return ll, dll
+
+    ll, dll = jax.vmap(jax.vmap(ll_rec, in_axes=(0, 0, 0)), in_axes=(0, 0, None))(
+        carry, dcarry, n_frames)  # (P, R), (P, R, 3)
+
+    def value_grad(pt, ll_p, dll_p):
+        _, vjp = jax.vjp(lambda z: _moments(z, scale, small, held), pt)
+        return -jnp.sum(ll_p), vjp(-dll_p)[0]
+
+    vals, grads = jax.vmap(value_grad)(_points(x, h), ll, dll)
+    n = x.shape[0]
+    hess = (grads[1:1 + n] - grads[1 + n:]) / (2 * h)
+    return vals[0], grads[0], 0.5 * (hess + hess.T)
+
+
+def _split(nll, args):
+    """``(exact args, held)`` where the chunked pass applies to ``nll`` and ``args``, else
+    None."""
+    if nll is exact_nll and isinstance(args, ExactArgs):
+        return args, None
+    from ._fixed import _REDUCED, FixedArgs  # imports this package's _fit: not at the top
+
+    if (isinstance(args, FixedArgs) and isinstance(args.inner, ExactArgs)
+            and _REDUCED.get(exact_nll) is nll):
+        return args.inner, (args.full, args.free)
+    return None
+
+
+def exact_chunk_pass(nll, args, h):
+    """The finite-difference Newton pass ``(x, scale) -> (value, grad, hess)`` of ``nll``
+    (``exact_nll``, or its reduced objective with held parameters) in frame chunks, or None
+    where it does not apply (other objectives, or :data:`FRAME_CHUNK` None)."""
+    split = None if FRAME_CHUNK is None else _split(nll, args)
+    if split is None:
+        return None
+    ex, held = split
+    chunks = frame_chunks(ex, FRAME_CHUNK)
+    n_frames = jnp.asarray(np.sum(np.asarray(ex.mask, dtype=float), axis=-1))
+    empty = jnp.zeros((ex.ys.shape[0], 0), ex.ys.dtype)
+    small = eqx.tree_at(lambda a: (a.ys, a.mask), ex, (empty, empty))  # no frames: no shape
+
+    def pass_fn(x, scale):
+        theta, carry, dcarry = _start(x, scale, small, held, h)
+        for c in chunks:
+            carry, dcarry = _chunk_jvp(theta, carry, dcarry, c, ex.mean)
+        return _finish(x, scale, small, held, h, carry, dcarry, n_frames)
+
+    return pass_fn
