@@ -205,6 +205,11 @@ def report_bootstrap(path):
     if np.isfinite(d["m2"]).any():
         c2 = np.array([_valid(a - b2, a) for a, b2 in zip(v, d["m2"])])
         _line("bootstrap iterated once (fit - bias at corrected)", c2, tr)
+    bound = d["bound"].astype(bool)
+    for name, sel in (("at the bound", bound), ("interior", ~bound)):
+        print(f"eps^2 {name} (n = {int(sel.sum())}):")
+        _line("MLE", v[sel], tr)
+        _line("bootstrap, additive", c1[sel], tr)
     iv = d["iv"]
     have = np.isfinite(iv[:, 0, 0])
     if have.any():
