@@ -205,11 +205,12 @@ def exact_chunk_pass(nll, args, h):
     """The finite-difference Newton pass ``(x, scale) -> (value, grad, hess)`` of ``nll``
     (``exact_nll``, or its reduced objective with held parameters) in frame chunks, or None
     where it does not apply (other objectives, or :data:`FRAME_CHUNK` None)."""
-    split = None if FRAME_CHUNK is None else _split(nll, args)
-    if split is None:
+    size = FRAME_CHUNK
+    split = None if size is None else _split(nll, args)
+    if split is None or size is None:
         return None
     ex, held = split
-    chunks = frame_chunks(ex, FRAME_CHUNK)
+    chunks = frame_chunks(ex, size)
     n_frames = jnp.asarray(np.sum(np.asarray(ex.mask, dtype=float), axis=-1))
     empty = jnp.zeros((ex.ys.shape[0], 0), ex.ys.dtype)
     small = eqx.tree_at(lambda a: (a.ys, a.mask), ex, (empty, empty))  # no frames: no shape
