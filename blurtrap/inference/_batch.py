@@ -316,7 +316,9 @@ def _continue_unfinished(y, shared: SpectralArgs, acq, n_blocks, m, check_units:
         rows = np.flatnonzero(~success & ~skip & np.all(np.isfinite(val) & (val > 0), axis=1))
         if rows.size == 0:
             return
-        chunk = -(-min(rows.size, _CHUNK * n_dev) // n_dev) * n_dev
+        # the first pass's chunk shape: its compiled program serves again, and each device
+        # sees the same shape as with one device (results bit for bit those of one device)
+        chunk = -(-min(y.shape[0], _CHUNK * n_dev) // n_dev) * n_dev
         for j0 in range(0, rows.size, chunk):
             idx = rows[j0:j0 + chunk]
             power, _, log_ref, _, _ = _prepare(y[idx], n_blocks, m, dt, w, t,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import numpy as np
 
 import blurtrap as bt
@@ -49,3 +50,25 @@ def test_unconverged_items_are_continued_together_and_equal_calibrate(monkeypatc
         np.testing.assert_allclose([r.k[i], r.gamma[i]], [one.k, one.gamma], rtol=1e-8)
         np.testing.assert_allclose([r.k_err[i], r.gamma_err[i]], [one.k_err, one.gamma_err],
                                    rtol=1e-6)
+
+
+def test_continuation_reuses_the_compiled_fit():
+    """Another batch of the same shape with a different number of unconverged items compiles
+    nothing: the continuation runs in the first pass's chunk shape (before: a program per
+    count of unconverged items)."""
+    bt.calibrate_batch(circulant_frames(K, GAMMA, W, DT, (2e-9) ** 2, 4096, seed=12, reps=32),
+                       frame_interval=DT, exposure=W)
+    y = circulant_frames(K, GAMMA, W, DT, (2e-9) ** 2, 4096, seed=13, reps=32)
+    names = []
+
+    def listen(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            names.append(str(kw.get("fun_name", "?")))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        r = bt.calibrate_batch(y, frame_interval=DT, exposure=W)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert r.at_bound.sum() >= 1
+    assert names == [], names

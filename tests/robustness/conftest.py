@@ -1,5 +1,7 @@
 """Shared helpers of the robustness tests.
 
+``compiles``: the names of the programs XLA compiles during a test.
+
 ``bad_input(category, fn, *, match, exc=ValueError, value=...)`` runs ``fn()``, asserts that it
 raises ``exc`` whose message matches ``match`` (``pytest.raises(..., match=...)``) and, when the
 environment variable ``BLURTRAP_BAD_INPUT_LOG`` names a file, appends one JSON line
@@ -11,7 +13,33 @@ is safe across pytest-xdist workers.
 import json
 import os
 
+import jax
 import pytest
+
+COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
+
+
+class CompileCounter:
+    """Names of the functions XLA compiles while registered (``jax.monitoring``)."""
+
+    def __init__(self):
+        self.names: list[str] = []
+
+    def __call__(self, event, duration, **kwargs):
+        if event == COMPILE_EVENT:
+            self.names.append(str(kwargs.get("fun_name", "?")))
+
+    def reset(self):
+        self.names.clear()
+
+
+@pytest.fixture
+def compiles():
+    """A :class:`CompileCounter` listening for the duration of the test."""
+    counter = CompileCounter()
+    jax.monitoring.register_event_duration_secs_listener(counter)
+    yield counter
+    jax.monitoring.unregister_event_duration_listener(counter)
 
 
 def _log(category: str, value, message: str) -> None:

@@ -21,7 +21,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _simconfig import DT, GAMMA
-from test_no_recompile import CompileCounter
 
 import blurtrap as bt
 from blurtrap.inference import _chunked, _problems
@@ -43,13 +42,6 @@ STEPS = _problems.BUCKET_STEPS  # the package default (powers of two)
 QUARTER = (1.0, 1.25, 1.5, 1.75)
 NAMES = ("k", "gamma", "tracking_var")
 
-
-@pytest.fixture
-def compiles():
-    counter = CompileCounter()
-    jax.monitoring.register_event_duration_secs_listener(counter)
-    yield counter
-    jax.monitoring.unregister_event_duration_listener(counter)
 
 
 @pytest.fixture
@@ -164,6 +156,18 @@ def test_new_length_in_the_same_bucket_does_not_recompile(compiles, buckets, kw,
     assert compiles.names != []
 
 
+def _assert_chunk_sums_are_the_whole(chunks, x, scale, a):
+    """The per-chunk value, gradient and Hessian summed over ``chunks`` equal JAX autodiff of
+    the whole objective of ``a`` at ``x`` (1e-11 of the largest entry)."""
+    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
+    for c in chunks:
+        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
+    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
+    for got, want in zip(acc, ref):
+        got, want = np.asarray(got), np.asarray(want)
+        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+
+
 # ------------------------------------------------------------------------------------------
 # The default Whittle fit in fixed-size ordinate chunks (blurtrap.inference._chunked)
 # ------------------------------------------------------------------------------------------
@@ -184,13 +188,7 @@ def test_chunk_sums_equal_autodiff_of_the_whole_objective():
     assert len(chunks) == 2 and all(c.f.shape == (2, 16384) for c in chunks)
     scale = jnp.asarray([2.1e-5, 1.9e-5, 1.05 * GAMMA, 5e-18])
     x = jnp.asarray([0.03, -0.02, 0.01, 0.2])
-    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
-    for c in chunks:
-        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
-    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
-    for got, want in zip(acc, ref):
-        got, want = np.asarray(got), np.asarray(want)
-        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+    _assert_chunk_sums_are_the_whole(chunks, x, scale, a)
 
 
 def test_binned_ordinates_equal_the_jax_grouping():
@@ -290,13 +288,7 @@ def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
     if model.endswith("hydrodynamics"):
         scale = scale.at[4:].set(1.5e-6)
     x = jnp.asarray(np.linspace(0.03, -0.02, n))
-    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
-    for c in chunks:
-        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
-    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
-    for got, want in zip(acc, ref):
-        got, want = np.asarray(got), np.asarray(want)
-        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+    _assert_chunk_sums_are_the_whole(chunks, x, scale, a)
     psd = _chunked.model_psd_in_chunks(eqx.filter_jit(_problems.spectral_model_psd),
                                        jnp.asarray(scale * np.exp(x)), a)
     want = np.asarray(_problems.spectral_model_psd(scale * jnp.exp(x), a))

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from _simconfig import DT, GAMMA
 from scipy.linalg import toeplitz
-from test_no_recompile import CompileCounter
 
 import blurtrap as bt
 from blurtrap.inference import _exact_chunks
@@ -25,14 +24,6 @@ from blurtrap.inference._fixed import reduced_objective
 from blurtrap.inference._models import get_model
 from blurtrap.inference._newton import fd_hessian_pass
 from blurtrap.inference._problems import exact_nll, make_exact_args, make_layout
-
-
-@pytest.fixture
-def compiles():
-    counter = CompileCounter()
-    jax.monitoring.register_event_duration_secs_listener(counter)
-    yield counter
-    jax.monitoring.unregister_event_duration_listener(counter)
 
 
 def frames(n, seed, k=2e-5):

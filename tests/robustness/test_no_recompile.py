@@ -20,28 +20,6 @@ from _simconfig import DT, GAMMA, sim
 
 import blurtrap as bt
 
-COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
-
-
-class CompileCounter:
-    def __init__(self):
-        self.names: list[str] = []
-
-    def __call__(self, event, duration, **kwargs):
-        if event == COMPILE_EVENT:
-            self.names.append(str(kwargs.get("fun_name", "?")))
-
-    def reset(self):
-        self.names.clear()
-
-
-@pytest.fixture
-def compiles():
-    counter = CompileCounter()
-    jax.monitoring.register_event_duration_secs_listener(counter)
-    yield counter
-    jax.monitoring.unregister_event_duration_listener(counter)
-
 
 def test_counter_sees_compilations(compiles):
     """The counter must be able to fail: a fresh jitted function compiles once per shape."""
