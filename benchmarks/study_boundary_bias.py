@@ -120,12 +120,9 @@ def _boot_mean(tpl, v, key, n_boot, n_frames, max_iter):
 
 def _valid(c, v):
     """The corrected value kept valid: eps^2 >= 0; k, gamma > 0 (else the ratio form)."""
-    c = np.array(c, dtype=float)
-    c[2] = max(c[2], 0.0)
-    for j in (0, 1):
-        if not c[j] > 0:
-            c[j] = v[j] ** 2 / (2 * v[j] - c[j])
-    return c
+    from blurtrap.inference._bias import _keep_valid
+
+    return _keep_valid(c, v, ("positive", "positive", "nonnegative"))
 
 
 def run_bootstrap(n, n_boot, seed, out, n_iv, max_iter, iterate):

@@ -263,13 +263,19 @@ def _fit_chunks(y, shared: SpectralArgs, acq, n_blocks, m, check_units: bool, pe
         if np.all(pre[i0:i1] != ""):  # nothing to fit in this chunk
             pending.append((i0, i1, None))
             continue
-        pad = chunk - (i1 - i0)  # the last chunk repeats its first row: same compiled shape
-        if pad:
-            power, starts, log_ref = (np.concatenate([z, np.repeat(z[:1], pad, axis=0)])
-                                      for z in (power, starts, log_ref))
+        # the last chunk repeats its first row: same compiled shape
+        power, starts, log_ref = _pad_rows(chunk, power, starts, log_ref)
         pending.append((i0, i1, _batch_fit(put(starts), put(power[:, None, :]), put(log_ref),
                                            shared, per, nbin)))
     return pending, stats, pre
+
+
+def _pad_rows(chunk, *arrays):
+    """Each array padded to ``chunk`` rows with copies of its first row (one compiled shape
+    for every chunk; the copies' results are dropped)."""
+    pad = chunk - arrays[0].shape[0]
+    return tuple(np.concatenate([z, np.repeat(z[:1], pad, axis=0)]) if pad else z
+                 for z in arrays)
 
 
 def _collect(pending, b: int, n_par: int, progress: bool = False):
@@ -323,11 +329,7 @@ def _continue_unfinished(y, shared: SpectralArgs, acq, n_blocks, m, check_units:
             idx = rows[j0:j0 + chunk]
             power, _, log_ref, _, _ = _prepare(y[idx], n_blocks, m, dt, w, t,
                                                shared.model.noise, check_units)
-            starts = val[idx]
-            pad = chunk - idx.size
-            if pad:
-                power, starts, log_ref = (np.concatenate([z, np.repeat(z[:1], pad, axis=0)])
-                                          for z in (power, starts, log_ref))
+            power, starts, log_ref = _pad_rows(chunk, power, val[idx], log_ref)
             out, g = _batch_fit(put(starts), put(power[:, None, :]), put(log_ref), shared,
                                 per, nbin)
             n_i = idx.size

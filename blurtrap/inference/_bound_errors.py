@@ -101,17 +101,21 @@ def cov_from_hessian(h, s, at_bound):
     return np.where(pd[..., None, None], cov, np.nan), pd
 
 
-def unconstrained_cov(nll, value, args, scale, at_bound, fd=False):
+def unconstrained_cov(nll, value, args, scale, at_bound, fd=False, parts=None):
     """``(cov, pd)``: the inverse of the full observed information in natural parameters at
     ``value``, every parameter free, the bound ones included (they can move both ways;
     conservative near the bound), from :func:`natural_hessian` (with ``fd`` a first pass
     sets the bound parameters' difference step, :func:`rescaled_units`); see
-    :func:`cov_from_hessian`. On the host; one jitted Hessian per pass."""
+    :func:`cov_from_hessian`. On the host; one jitted Hessian per pass. ``parts``: pieces of
+    ``args`` whose objectives sum to ``nll`` on ``args`` (e.g. ordinate chunks, so that a new
+    record length compiles no Hessian program); their Hessians are summed."""
     at_bound = np.asarray(at_bound, bool)
+    parts = [args] if parts is None else parts
 
     def hess(s):
-        return np.asarray(_natural_hessian_jit(nll, jnp.asarray(value), args, jnp.asarray(s),
-                                               jnp.asarray(at_bound), bool(fd)))
+        return sum(np.asarray(_natural_hessian_jit(nll, jnp.asarray(value), a, jnp.asarray(s),
+                                                   jnp.asarray(at_bound), bool(fd)))
+                   for a in parts)
 
     s = bound_units(scale, value, at_bound)
     h = hess(s)
@@ -121,16 +125,17 @@ def unconstrained_cov(nll, value, args, scale, at_bound, fd=False):
     return cov_from_hessian(h, s, at_bound)
 
 
-def release_bound(nll, scale, args, out, fd=False):
+def release_bound(nll, scale, args, out, fd=False, parts=None):
     """``out`` (a ``FitOutput``) with the errors of the parameters not at a bound replaced
     by the unconstrained ones (:func:`unconstrained_cov`) when some parameter is at its bound;
     the conditional covariance kept in ``cov_given_bound``. Where the full information is not positive
     definite ``cov`` stays conditional and ``conditional`` is True. Decided on the host after
-    the fit: nothing is computed when no parameter is at a bound."""
+    the fit: nothing is computed when no parameter is at a bound. ``parts``: see
+    :func:`unconstrained_cov`."""
     if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
         return out
     cov, pd = unconstrained_cov(nll, np.asarray(out.value), args, np.asarray(scale),
-                                np.asarray(out.at_bound), fd)
+                                np.asarray(out.at_bound), fd, parts)
     new = jnp.asarray(cov) if bool(pd) else out.cov
     return dataclasses.replace(out, cov=new, cov_given_bound=out.cov,
                                conditional=jnp.asarray(not bool(pd)))

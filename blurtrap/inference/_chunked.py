@@ -18,14 +18,11 @@ is all 0 (bucket padding) add exactly 0 and are skipped, so the padding costs no
 
 from __future__ import annotations
 
-import dataclasses
-
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._bound_errors import _natural_hessian_jit, bound_units, cov_from_hessian
 from ._newton import SafeguardedNewton
 from ._nodes import use_nodes
 from ._problems import SpectralArgs, SpectralObjective
@@ -244,21 +241,3 @@ def host_newton_loop(pass_fn, x0, rtol, atol, max_steps):
     if not bool(stop) and bool(result == optx.RESULTS.successful):
         result = optx.RESULTS.nonlinear_max_steps_reached
     return state, result
-
-
-def release_bound_chunks(nll, scale, args, out):
-    """:func:`._bound_errors.release_bound` (autodiff Hessian) of ``nll`` on ``args`` with
-    the natural-parameter Hessian summed over the ordinate chunks: with a parameter at its
-    bound (eps^2, a drift diffusion ... -> 0) the others' errors are the unconstrained ones,
-    and a new record length compiles no Hessian program."""
-    if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
-        return out
-    at_bound = np.asarray(out.at_bound, bool)
-    s = bound_units(np.asarray(scale), np.asarray(out.value), at_bound)
-    value, s_j, bound_j = jnp.asarray(out.value), jnp.asarray(s), jnp.asarray(at_bound)
-    h = sum(np.asarray(_natural_hessian_jit(nll, value, c, s_j, bound_j, False))
-            for c in ordinate_chunks(args))
-    cov, pd = cov_from_hessian(h, s, at_bound)
-    new = jnp.asarray(cov) if bool(pd) else out.cov
-    return dataclasses.replace(out, cov=new, cov_given_bound=out.cov,
-                               conditional=jnp.asarray(not bool(pd)))

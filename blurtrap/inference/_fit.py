@@ -36,7 +36,6 @@ from ._chunked import (
     host_newton_loop,
     host_newton_minimise,
     ordinate_chunks,
-    release_bound_chunks,
 )
 from ._exact_chunks import exact_chunk_pass
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
@@ -324,7 +323,7 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
         return out
     if _chunked.objective_chunkable(nll, args):
         # the natural-parameter Hessian at a bound summed over ordinate chunks
-        return release_bound_chunks(nll, scale, args, out)
+        return release_bound(nll, scale, args, out, parts=ordinate_chunks(args))
     return release_bound(nll, scale, args, out)
 
 
