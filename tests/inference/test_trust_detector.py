@@ -129,7 +129,14 @@ def test_moderate_quantisation_does_not_bias_the_exact_fit():
         ref = bt.calibrate(_rec(x), method="likelihood", likelihood="exact")
         res = bt.calibrate(_rec(np.round(x / q) * q), method="likelihood", likelihood="exact")
         assert any("quantised" in n for n in res.notes)
-        assert res.tracking_var > ref.tracking_var  # it took up (part of) q^2/12
+        # it took up (part of) q^2/12 (1.7e-18 m^2): the estimate rises, or where eps^2 sits at
+        # its bound 0 in both fits (4 of 8; the reported value is only where the search
+        # stopped, < 1e-24 m^2) the upper end of its 95 % profile interval does
+        if ref.at_bounds:
+            assert res.at_bounds == ref.at_bounds
+            assert res.intervals["tracking_var"][1] > ref.intervals["tracking_var"][1]
+        else:
+            assert res.tracking_var > ref.tracking_var
         dk.append((res.k - ref.k) / _honest_se(ref, "k"))
         dg.append((res.gamma - ref.gamma) / _honest_se(ref, "gamma"))
     assert np.all(np.abs(dk) < 1.0) and np.all(np.abs(dg) < 1.0), (dk, dg)
