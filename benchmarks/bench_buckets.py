@@ -4,8 +4,7 @@
 likelihood) to bucket lengths (``_problems.bucket_length``: powers of two by default),
 so recordings of nearby lengths share compiled programs; the default Whittle fit runs in
 fixed-size ordinate chunks with its Newton loop on the host (``inference/_chunked.py``;
-models with effects only with ``_chunked.EFFECTS``: by default only their Hessian at a bound
-and fitted spectrum are chunked), and the exact
+models with effects too, by autodiff of each chunk's sum, ``_chunked.EFFECTS``), and the exact
 likelihood's pass runs in fixed-size frame chunks (``inference/_exact_chunks.py``), so a new
 length compiles none of their programs at all. In one fresh process per tree this
 script calibrates a first recording (compiles), repeats it (warm time), then calibrates

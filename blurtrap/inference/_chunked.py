@@ -38,12 +38,12 @@ HOST_NEWTON = True
 
 
 #: models with effects (autodiff pass) also run their Newton loop in ordinate chunks on the
-#: host. Off by default: a new length then compiles nothing, but each warm fit is ~5x slower
-#: (standard+drift at 62 739 frames: 2.0 s against 0.39 s, 58 steps of 40 ms against 5 ms:
-#: the single compiled loop keeps the data-only work of the autodiff pass out of the loop,
-#: benchmarks/RESULTS.md "Session 12"); the Hessian at a bound and the fitted spectrum
-#: (one-shot evaluations) are chunked for them either way
-EFFECTS = False
+#: host, so a recording of a new length compiles no fit program for them either (a compiled
+#: loop per power-of-two bucket cost 4-11 s at 2^16 frames). Each warm fit pays host
+#: dispatches and the data-only work a compiled loop keeps out of its body (benchmarks/
+#: RESULTS.md "Session 13"); False: one compiled Newton loop per padded length. The Hessian
+#: at a bound and the fitted spectrum (one-shot evaluations) are chunked either way
+EFFECTS = True
 
 
 def chunked_applies(nll, args) -> bool:

@@ -305,8 +305,9 @@ def fit_ml(nll: Callable, scale, args, *, rtol=1e-9, atol=1e-9, max_steps=400,
     lands on a non-minimum) BFGS takes over, compiled only when needed. The Whittle
     objective runs the same iteration in fixed-size ordinate chunks with the loop on the host
     (:func:`_chunked_newton`: a new record length compiles nothing), with the fused pass for
-    the core model, and with ``_chunked.EFFECTS`` autodiff of each chunk's sum for models
-    with effects (:func:`._chunked.args_chunkable` says where). ``nll`` must be a
+    the core model, and autodiff of each chunk's sum for models with effects
+    (:func:`._chunked.args_chunkable` says where; ``_chunked.EFFECTS = False`` compiles one
+    loop per padded length for them instead). ``nll`` must be a
     pure, module-level JAX function or objective: calls with arrays of the same shapes reuse
     the compiled code. With a parameter at its bound the others' errors are the
     unconstrained ones (:func:`._bound_errors.release_bound`), unless ``release`` is False

@@ -295,11 +295,11 @@ def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
     np.testing.assert_allclose(psd, want, rtol=1e-12, atol=0)
 
 
-@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "compiled loop"])
 def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, effects):
     """standard+drift on two recordings (drift at its bound 0: the errors from the
     natural-parameter Hessian summed over the chunks): the chunked host-Newton fit
-    (``_chunked.EFFECTS``), and by default the compiled loop with that Hessian and the
+    (``_chunked.EFFECTS``, the default), and the compiled loop with that Hessian and the
     fitted spectrum in chunks, give the estimates (1e-10), errors (1e-8) and goodness of fit
     of everything on the whole padded ordinates (``_chunked.CHUNK = None``)."""
     monkeypatch.setattr(_chunked, "EFFECTS", effects)
@@ -317,12 +317,13 @@ def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, effects):
     assert abs(a.gof["statistic"] / b.gof["statistic"] - 1) < 1e-10
 
 
-@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "default"])
+@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "compiled loop"])
 def test_new_length_with_effects_compiles_no_fit_program(compiles, monkeypatch, effects):
     """After a first standard+drift calibration, a recording in a new bucket compiles none
     of the fit's programs (Newton loop, Hessian at the bound, fitted spectrum) with the
-    Newton loop in chunks (``_chunked.EFFECTS``), and neither the Hessian at the bound nor
-    the spectrum by default; with the chunks off it compiles them again (can fail)."""
+    Newton loop in chunks (``_chunked.EFFECTS``, the default), and neither the Hessian at the
+    bound nor the spectrum with the compiled loop; with the chunks off it compiles them again
+    (can fail)."""
     monkeypatch.setattr(_chunked, "EFFECTS", effects)
     y = frames(150_000, 59)  # drift at its bound 0 in every fit below
     fit_programs = ("spectral_model_psd", "natural_hessian") + (
