@@ -201,7 +201,7 @@ class SafeguardedNewton(optx.AbstractMinimiser):
     rtol: float | Array
     atol: float | Array
     norm: Callable = eqx.field(static=True, default=optx.max_norm)
-    flat_atol: float = 0.0
+    flat_atol: float | Array = 0.0
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> NewtonState:
         n = y.shape[0]

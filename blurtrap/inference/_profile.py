@@ -6,7 +6,11 @@ Unlike the Wald interval (estimate +- 1.96 SE) it follows a non-quadratic likeli
 handles a bound: every profile fit keeps all parameters positive, and for a parameter whose
 profile at 0 is within 1.92 of the minimum (eps^2 at or near 0) the interval starts at 0.
 
-Everything runs in one jitted function per problem shape, vmapped over (parameter, side),
+Where the objective's pass runs in fixed-size chunks (the Whittle objective, the exact
+likelihood) the same algorithm runs with its loops on the host over that pass
+(:mod:`._profile_host`): a recording of a new length compiles nothing for its intervals.
+For the other objectives everything runs in one jitted function per problem shape, vmapped
+over (parameter, side),
 with a single traced Newton fit (the minimum is the first pass of every end point's loop, a
 restart from a bound the second pass of the fit's own loop: the compiled program is ~2-3x
 smaller than with separate copies):
@@ -36,6 +40,7 @@ import numpy as np
 
 from ._fit import _autodiff_pass, _newton_iterate, _plan, at_lower_bound
 from ._newton import fd_hessian_pass
+from ._profile_host import chunked_pass, host_profile_ends, wald_path_roots
 
 #: two-sided 95 % normal quantile and the likelihood drop at a 95 % interval end (chi^2_1)
 Z95 = 1.959963984540054
@@ -243,8 +248,16 @@ def _wald_path_roots(nll, args, value, cov):
     return r[:n], r[n:]
 
 
-def needs_profile(nll, args, value, cov, at_bound):
-    """Which parameters need a profile interval (bool per parameter; see the module doc)."""
+def _consts():
+    return {"z95": Z95, "drop": DROP, "log_zero": _LOG_ZERO, "root_tol": _ROOT_TOL,
+            "root_steps": _ROOT_STEPS, "newton_steps": _NEWTON_STEPS, "tol": 1e-9,
+            "flat_atol": _FLAT_ATOL}
+
+
+def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):
+    """Which parameters need a profile interval (bool per parameter; see the module doc);
+    with ``pass_fn`` (a chunked pass, :func:`._profile_host.chunked_pass`, at ``scale``)
+    the likelihood along the Wald paths is evaluated with it (nothing compiled per length)."""
     value = np.asarray(value, float)
     cov = np.asarray(cov, float)
     at_bound = np.asarray(at_bound, bool)
@@ -253,8 +266,11 @@ def needs_profile(nll, args, value, cov, at_bound):
         return np.ones(value.size, bool)
     if not np.all(np.isfinite(cov)):
         return np.zeros(value.size, bool)
-    lo, hi = _wald_path_roots(nll, args, jnp.asarray(value), jnp.asarray(cov))
-    lo, hi = np.asarray(lo), np.asarray(hi)
+    if pass_fn is not None:
+        lo, hi = wald_path_roots(pass_fn, scale, value, cov, Z95)
+    else:
+        lo, hi = _wald_path_roots(nll, args, jnp.asarray(value), jnp.asarray(cov))
+        lo, hi = np.asarray(lo), np.asarray(hi)
     with np.errstate(invalid="ignore"):
         return ~((np.abs(lo - Z95) <= WALD_TOL) & (np.abs(hi - Z95) <= WALD_TOL))
 
@@ -265,9 +281,14 @@ def profile_intervals(nll, args, scale, value, cov, at_bound, hessian="auto"):
     scale = jnp.asarray(scale)
     x_hat = jnp.log(jnp.maximum(jnp.asarray(value), 1e-300) / scale)
     x_hat = jnp.maximum(x_hat, _LOG_ZERO)
+    cov = np.nan_to_num(np.asarray(cov, float), nan=0.0)
+    pass_fn = chunked_pass(nll, args, hessian, _FD_STEP)
+    if pass_fn is not None:  # loops on the host, pass in chunks: nothing compiled per length
+        low, high, ok_lo, ok_hi = host_profile_ends(pass_fn, scale, x_hat, cov, at_bound,
+                                                    _consts())
+        return low, high, ok_lo & ok_hi
     low, high, ok_lo, ok_hi, _ = _profile_ends(
-        nll, args, scale, x_hat, jnp.asarray(np.nan_to_num(np.asarray(cov, float), nan=0.0)),
-        jnp.asarray(at_bound, bool), hessian)
+        nll, args, scale, x_hat, jnp.asarray(cov), jnp.asarray(at_bound, bool), hessian)
     return np.asarray(low), np.asarray(high), np.asarray(ok_lo) & np.asarray(ok_hi)
 
 
@@ -288,7 +309,9 @@ class ProfileIntervals:
         return float64_scope(self._compute)(result.param_names)
 
     def _compute(self, names):
-        need = needs_profile(self.nll, self.args, self.value, self.cov, self.at_bound)
+        pass_fn = chunked_pass(self.nll, self.args, self.hessian, _FD_STEP)
+        need = needs_profile(self.nll, self.args, self.value, self.cov, self.at_bound,
+                             pass_fn, self.scale)
         if not need.any():
             return {}, {}
         low, high, ok = profile_intervals(self.nll, self.args, self.scale, self.value,
