@@ -51,7 +51,9 @@ class TrapModel(eqx.Module):
     alias: bool = eqx.field(static=True, default=True)
     noise: bool = eqx.field(static=True, default=True)
     name: str = eqx.field(static=True, default="standard")
-    extra: tuple = eqx.field(static=True, default=())
+    # not static: a line's frequency and width are leaves (``effects.line_noise``); every
+    # other effect's configuration is static inside it, its values are None in a model
+    extra: tuple = ()
     n_alias: int = eqx.field(static=True, default=8)
     #: log-spaced nodes for the folded spectrum of long records (:mod:`._nodes`); 0: exact
     #: folded sum at every ordinate

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..effects.line_noise import traced_constants
 from ._likelihood import arma_loglik
 from ._models import TrapModel
 from ._newton import AbstractObjective
@@ -139,7 +140,7 @@ class SpectralArgs(eqx.Module):
     padding), so that every evaluation is a broadcast over (R, M) with no gathers."""
 
     layout: Layout
-    model: TrapModel
+    model: TrapModel = eqx.field(converter=traced_constants)
     meta: RecMeta
     f: jax.Array  # (R, M) [Hz]
     s2: jax.Array  # (R, M) sin^2(pi f dt)
