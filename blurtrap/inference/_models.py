@@ -45,7 +45,8 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 
 
 class TrapModel(eqx.Module):
-    """Harmonic trap seen through a detector, plus effects. All configuration is static."""
+    """Harmonic trap seen through a detector, plus effects. All configuration is static,
+    except a line's frequency and width (leaves, traced inside a fit's arguments)."""
 
     blur: bool = eqx.field(static=True, default=True)
     alias: bool = eqx.field(static=True, default=True)
