@@ -26,7 +26,12 @@ import optimistix as optx
 from ._newton import SafeguardedNewton
 from ._nodes import use_nodes
 from ._problems import SpectralArgs, SpectralObjective
-from ._whittle_pass import _COARSE_GROUPS, _COARSE_MAX_WIDTH, _fused_pass_applies
+from ._whittle_pass import (
+    _COARSE_GROUPS,
+    _COARSE_MAX_WIDTH,
+    _fused_pass_applies,
+    coarse_start_applies,
+)
 
 #: ordinates per chunk (a power of two); ``None`` turns the chunked fit off (one compiled
 #: Newton loop per padded length, the previous behaviour)
@@ -170,7 +175,7 @@ def coarse_chunks(args: SpectralArgs) -> list[SpectralArgs] | None:
     """The chunks of the coarse start-value objective (the grouping of
     :func:`._whittle_pass.spectral_newton_plan`), or None where it has none."""
     width = min(_COARSE_MAX_WIDTH, args.power.shape[-1] // _COARSE_GROUPS)
-    if width < 2 or not _fused_pass_applies(args):
+    if width < 2 or not coarse_start_applies(args):
         return None
     return ordinate_chunks(binned_ordinates(args, width))
 

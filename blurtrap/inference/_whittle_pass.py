@@ -83,18 +83,54 @@ def _sum_last(terms):
                           (terms[0].ndim - 1,))
 
 
-def _whittle_sums(a_c, c_c, r, m, s, power, weight):
+def _whittle_sums(a_c, c_c, r, m, s, power, weight, added=None):
     """Per-recording sums for the value, gradient and Hessian of
-    sum_j w_j [log P_j + I_j / P_j] with P_j = A + C T(r, s_j; M) in the variables (A, C, r)."""
+    sum_j w_j [log P_j + I_j / P_j] with P_j = A + C T(r, s_j; M) + E_j in the variables
+    (A, C, r) and, with ``added = (E, dE, d2E)`` (additive effects: their spectrum E and its
+    first and second derivatives in the effects' log-parameters, shapes (R, M), (n_e, R, M),
+    (n_e, n_e, R, M)), in those too: the 11 core sums, then per effect parameter i
+    sum g dE_i, sum z dE_i, sum z T dE_i, sum z T' dE_i, then for i <= j
+    sum z dE_i dE_j + g d2E_ij."""
     col = lambda z: z[..., None]  # noqa: E731
     t, tp, tq = _t_and_derivatives(s, col(r), col(m))
     p = col(a_c) + col(c_c) * t
+    if added is not None:
+        p = p + added[0]
     u = 1.0 / p
     q = power * u
     g = weight * (1.0 - q) * u  # d/dP of w (log P + I/P)
     z = weight * (2.0 * q - 1.0) * u * u  # d2/dP2
-    return _sum_last((weight * (jnp.log(p) + q), g, g * t, g * tp, g * tq,
-                      z, z * t, z * tp, z * t * t, z * t * tp, z * tp * tp))
+    terms = [weight * (jnp.log(p) + q), g, g * t, g * tp, g * tq,
+             z, z * t, z * tp, z * t * t, z * t * tp, z * tp * tp]
+    if added is not None:
+        _, de, d2e = added
+        n_e = de.shape[0]
+        for i in range(n_e):
+            terms += [g * de[i], z * de[i], z * t * de[i], z * tp * de[i]]
+        for i in range(n_e):
+            for j in range(i, n_e):
+                terms.append(z * de[i] * de[j] + g * d2e[i, j])
+    return _sum_last(tuple(terms))
+
+
+def _additive_spectrum(x, scale, a: SpectralArgs):
+    """The additive effects' spectrum E (R, M) and its first and second derivatives in their
+    log-parameters ``x[n0:]`` (forward mode, one evaluation per direction): ``(E, dE, d2E)``
+    with shapes (R, M), (n_e, R, M), (n_e, n_e, R, M); ``n0`` the number of core parameters."""
+    n0 = len(a.layout.names) - len(a.layout.extra_names)
+    dt = (a.meta.dt * jnp.ones(a.f.shape[:-1], a.f.dtype))[:, None]
+
+    def spectrum(xe):
+        p = scale[n0:] * jnp.exp(xe)
+        extras = dict(zip(a.layout.extra_names, p))
+        return sum(e.psd_add(a.f, dt, extras) for e in a.model.extra)
+
+    xe = x[n0:]
+    d1 = jax.jacfwd(spectrum)
+    e_val = spectrum(xe)
+    de = jnp.moveaxis(d1(xe), -1, 0)
+    d2e = jnp.moveaxis(jnp.moveaxis(jax.jacfwd(d1)(xe), -1, 0), -1, 0)
+    return e_val, de, d2e
 
 
 def _log_variables(p, a: SpectralArgs):
@@ -163,8 +199,9 @@ def spectral_newton_pass(x, scale, a: SpectralArgs):
     lin = jax.jacfwd(z_of_x)(x)  # (3, R, n), constant in x
     phi, jac, hess = _coefficients_in_log_variables(z, a)
     a_c, c_c, r = phi
-    val, g0, g1, g2, g3, z0, z1, z2, z11, z12, z22 = _whittle_sums(
-        a_c, c_c, r, a.block_len, a.s2, a.power, a.weight)
+    added = _additive_spectrum(x, scale, a) if a.model.extra else None
+    sums = _whittle_sums(a_c, c_c, r, a.block_len, a.s2, a.power, a.weight, added)
+    val, g0, g1, g2, g3, z0, z1, z2, z11, z12, z22 = sums[:11]
     g_phi = jnp.stack([g0, g1, c_c * g2])  # (3, R)
     h12 = c_c * z12 + g2  # includes d2P/dC dr = dT/dr
     h_phi = jnp.stack([jnp.stack([z0, z1, c_c * z2]),
@@ -174,8 +211,30 @@ def spectral_newton_pass(x, scale, a: SpectralArgs):
     h_z = (jnp.einsum("kir,klr,ljr->ijr", jac, h_phi, jac)
            + jnp.einsum("kr,kijr->ijr", g_phi, hess))
     value = jnp.sum(val) - a.log_ref * jnp.sum(a.weight)
-    return (value, jnp.einsum("irn,ir->n", lin, g_z),
-            jnp.einsum("irn,ijr,jrm->nm", lin, h_z, lin))
+    grad = jnp.einsum("irn,ir->n", lin, g_z)
+    hessian = jnp.einsum("irn,ijr,jrm->nm", lin, h_z, lin)
+    if added is None:
+        return value, grad, hessian
+    # additive effects: P = A + C T + E(x_e), E independent of the core parameters, whose
+    # log-variables z do not depend on x_e (``lin`` is 0 in those columns)
+    n_e = added[1].shape[0]
+    n0 = x.shape[0] - n_e
+    per = sums[11:11 + 4 * n_e]
+    g_e = jnp.stack([jnp.sum(per[4 * i]) for i in range(n_e)])
+    h_phi_e = jnp.stack([jnp.stack([per[4 * i + 1], per[4 * i + 2], c_c * per[4 * i + 3]])
+                         for i in range(n_e)], axis=1)  # (3, n_e, R): d2/dphi dx_e
+    h_z_e = jnp.einsum("kar,kir->air", jac, h_phi_e)
+    h_ce = jnp.einsum("arn,air->ni", lin, h_z_e)  # (n, n_e)
+    pair = iter(sums[11 + 4 * n_e:])
+    h_ee = jnp.zeros((n_e, n_e), x.dtype)
+    for i in range(n_e):
+        for j in range(i, n_e):
+            v = jnp.sum(next(pair))
+            h_ee = h_ee.at[i, j].set(v).at[j, i].set(v)
+    grad = grad.at[n0:].add(g_e)
+    hessian = (hessian.at[:, n0:].add(h_ce).at[n0:, :].add(h_ce.T)
+               .at[n0:, n0:].add(h_ee))
+    return value, grad, hessian
 
 
 def _binned_args(a: SpectralArgs, width: int) -> SpectralArgs:
@@ -204,16 +263,25 @@ _COARSE_MAX_WIDTH = 32
 
 
 def _fused_pass_applies(a: SpectralArgs) -> bool:
-    """The closed-form expected periodogram with no effects (static fields only)."""
-    return bool(a.block_len is not None and not a.model.extra and a.model.closed_form
-                and a.model.alias)
+    """The closed-form expected periodogram, with no effects or additive ones only (drift,
+    line noise: their spectrum is added, :func:`_additive_spectrum`); static fields only."""
+    return bool(a.block_len is not None and a.model.closed_form and a.model.alias
+                and all(e.kind == "additive" for e in a.model.extra))
+
+
+def coarse_start_applies(a: SpectralArgs) -> bool:
+    """The binned coarse objective gives start values: the fused pass with no effects (a
+    narrow line or a 1/f^2 excess is not kept by averaging ordinates in groups)."""
+    return _fused_pass_applies(a) and not a.model.extra
 
 
 def spectral_newton_plan(a: SpectralArgs):
     """``(pass_fn, coarse_args)`` of :class:`SpectralObjective` when the model is the
-    closed-form expected periodogram with no effects, else ``None`` (generic autodiff).
-    Decided from static fields and shapes only."""
+    closed-form expected periodogram with no effects or additive ones only (``coarse_args``
+    None with effects), else ``None`` (generic autodiff). Decided from static fields and
+    shapes only."""
     if not _fused_pass_applies(a):
         return None
     width = min(_COARSE_MAX_WIDTH, a.power.shape[-1] // _COARSE_GROUPS)
-    return spectral_newton_pass, (_binned_args(a, width) if width >= 2 else None)
+    coarse = coarse_start_applies(a) and width >= 2
+    return spectral_newton_pass, (_binned_args(a, width) if coarse else None)

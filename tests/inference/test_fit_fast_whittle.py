@@ -16,6 +16,7 @@ import pytest
 from scipy import special
 
 import blurtrap as bt
+from blurtrap.effects import injections
 from blurtrap.inference import _batch, _fit, _spectral, _starts
 from blurtrap.inference._models import get_model
 from blurtrap.inference._problems import (
@@ -113,11 +114,11 @@ def test_expected_periodogram_precomputed_s2_is_the_same():
 # ------------------------------------------------------------------------------------------
 # one-pass value, gradient and Hessian against autodiff
 # ------------------------------------------------------------------------------------------
-def _recordings(seed, specs):
+def _recordings(seed, specs, injections=()):
     out = []
     for i, (k, n, w, power, temp) in enumerate(specs):
         x = bt.simulate(k, GAMMA, w, DT, n, key=jax.random.key(seed + i), method="exact_frames",
-                        tracking_std=2e-9, temperature=temp)
+                        tracking_std=2e-9, temperature=temp, injections=injections)
         out.append(bt.Recording(np.asarray(x).reshape(-1), frame_interval=DT, exposure=w,
                                 laser_power=power, temperature=temp))
     return out
@@ -136,15 +137,26 @@ CASES = {
         [(3e-5, 8192, DT, 0.1, 295.0), (6e-5, 8192, DT, 0.2, 295.0)]),
     "blur (no noise), one recording": (
         "blur", "shared", 1, None, [(5e-5, 8192, DT / 2, None, 300.0)]),
+    # additive effects ride on the fused pass (their spectrum and its derivatives added)
+    "standard+drift+line per_recording, 2 lengths": (
+        get_model("standard").add("drift").add("line_noise", frequency=123.4, width=0.2),
+        "per_recording", 1, None,
+        [(3e-5, 8192, DT, 0.1, 295.0), (5e-5, 6000, DT / 2, 0.2, 300.0)]),
+    "blur+drift, blocked, f_range": (
+        "blur+drift", "shared", 4, (5.0, 700.0), [(5e-5, 8192, DT, None, 295.0)]),
 }
 
 
 @pytest.fixture(scope="module", params=list(CASES))
 def problem(request):
     model, k_mode, n_blocks, f_range, specs = CASES[request.param]
-    recs = _recordings(7, specs)
     mdl = get_model(model)
-    layout = make_layout(recs, k_mode, mdl.noise)
+    # the effects present in the data, so that their parameters' optimum is interior
+    inject = [injections.RandomWalkDrift(2e-16)] if mdl.has("drift") else []
+    if mdl.has("line_noise"):
+        inject.append(injections.SinusoidDrift(10e-9, 1 / 123.4))
+    recs = _recordings(7, specs, inject)
+    layout = make_layout(recs, k_mode, mdl.noise, tuple(p.name for p in mdl.extra_params))
     args = _spectral._spectral_args(recs, layout, mdl, n_blocks, f_range)
     scale = _starts._start_vector(recs, layout, mdl.noise)
     return args, scale

@@ -295,20 +295,24 @@ def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
     np.testing.assert_allclose(psd, want, rtol=1e-12, atol=0)
 
 
-@pytest.mark.parametrize("effects", [True, False], ids=["chunked loop", "compiled loop"])
-def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, effects):
-    """standard+drift on two recordings (drift at its bound 0: the errors from the
-    natural-parameter Hessian summed over the chunks): the chunked host-Newton fit
-    (``_chunked.EFFECTS``, the default), and the compiled loop with that Hessian and the
-    fitted spectrum in chunks, give the estimates (1e-10), errors (1e-8) and goodness of fit
-    of everything on the whole padded ordinates (``_chunked.CHUNK = None``)."""
+@pytest.mark.parametrize("model, effects", [
+    ("standard+drift", True), ("photodiode_aa+drift", True), ("photodiode_aa+drift", False)],
+    ids=["fused pass, chunked loop", "autodiff pass, chunked loop",
+         "autodiff pass, compiled loop"])
+def test_chunked_fit_with_effects_equals_one_compiled_fit(monkeypatch, model, effects):
+    """A model with drift on two recordings (drift at its bound 0: the errors from the
+    natural-parameter Hessian summed over the chunks): the chunked host-Newton fit (the
+    fused pass with drift's spectrum added for standard+drift; autodiff of each chunk's sum
+    for the unaliased model, ``_chunked.EFFECTS``, the default), and the compiled loop with
+    that Hessian and the fitted spectrum in chunks, give the estimates (1e-10), errors
+    (1e-8) and goodness of fit of everything on the whole padded ordinates
+    (``_chunked.CHUNK = None``)."""
     monkeypatch.setattr(_chunked, "EFFECTS", effects)
     data = bt.RecordingSet([rec(frames(n, 45 + i)) for i, n in enumerate((40_000, 70_000))])
     out = {}
     for chunk in (_chunked.CHUNK, None):
         monkeypatch.setattr(_chunked, "CHUNK", chunk)
-        out[chunk] = bt.calibrate(data, model="standard+drift", k="per_recording",
-                                  likelihood="whittle")
+        out[chunk] = bt.calibrate(data, model=model, k="per_recording", likelihood="whittle")
     a, b = out[None], out[_chunked.CHUNK or 16384]
     assert a.converged and b.converged and a.param_names == b.param_names
     assert np.isnan(a.errors[-1])  # drift at its bound: the unconstrained errors were used
