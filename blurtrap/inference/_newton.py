@@ -192,7 +192,10 @@ class SafeguardedNewton(optx.AbstractMinimiser):
       returns. A parameter whose optimum is on its boundary (eps^2 -> 0) moves by
       ~MAX_LOG_STEP in log units for ever while the objective stops changing and the Hessian
       becomes only semi-definite; there, and only there, a Newton decrement ``g.dx`` below
-      ``_FTOL (1 + |v|) + flat_atol`` counts as converged.
+      ``_FTOL (1 + |v|) + flat_atol`` counts as converged. With ``value_atol`` > 0 (a fit
+      whose value is all that is used: diagnose's screening fits), a Newton decrement
+      ``g.dx`` (twice the decrease still to come) below it with a positive semi-definite
+      Hessian also counts.
 
     Each step makes exactly one pass (one call of ``fn``). ``optx.minimise``'s ``max_steps``
     counts passes: ``max_steps = n + 1`` allows ``n`` Newton steps. The final state holds the
@@ -202,6 +205,7 @@ class SafeguardedNewton(optx.AbstractMinimiser):
     atol: float | Array
     norm: Callable = eqx.field(static=True, default=optx.max_norm)
     flat_atol: float | Array = 0.0
+    value_atol: float | Array = 0.0
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> NewtonState:
         n = y.shape[0]
@@ -214,10 +218,10 @@ class SafeguardedNewton(optx.AbstractMinimiser):
     def _converged(self, t, vt, gt, dxt, pd, psd, size_prev):
         a = jnp.max(jnp.abs(dxt))
         tol = self.atol + self.rtol * jnp.max(jnp.abs(t))
-        flat = ~pd & psd & (jnp.abs(jnp.dot(gt, dxt))
-                            < _FTOL * (1.0 + jnp.abs(vt)) + self.flat_atol)
+        dec = jnp.abs(jnp.dot(gt, dxt))
+        flat = ~pd & psd & (dec < _FTOL * (1.0 + jnp.abs(vt)) + self.flat_atol)
         quick = (a < size_prev) & (a * a < tol * (size_prev - a))
-        return (pd & ((a < tol) | quick)) | flat, a
+        return (pd & ((a < tol) | quick)) | flat | (psd & (dec < self.value_atol)), a
 
     def step(self, fn, y, args, options, state: NewtonState, tags):
         t = self.trial(y, state)
