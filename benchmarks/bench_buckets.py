@@ -13,7 +13,7 @@ time of a recording of that size (the warm time is measured on each recording by
 call). Two cases: 50 000-70 000 frames (default likelihood: Whittle) and 3000-5000 frames
 with ``likelihood="exact"`` (``--cases 0,1``, the default), 40 000-1 100 000 frames
 (Whittle, ``--cases 2``: many buckets), and a model with an effect, ``standard+drift``
-(Whittle with the autodiff pass, 50 000-70 000 frames, ``--cases 3``). No persistent
+(Whittle, the fused pass with drift added since fd297e8, autodiff before; 50 000-70 000 frames, ``--cases 3``). No persistent
 compilation cache is enabled.
 
 Run: ``python benchmarks/bench_buckets.py [--base DIR] [--count 10]`` where ``DIR`` holds
@@ -59,7 +59,7 @@ print(json.dumps({"lengths": lengths, "first": first, "warm_first": warm0,
 CASES = [("default (Whittle), 50 000-70 000 frames", 50_000, 70_000, {}),
          ("exact, 3000-5000 frames", 3000, 5000, {"likelihood": "exact"}),
          ("default (Whittle), 40 000-1 100 000 frames", 40_000, 1_100_000, {}),
-         ("standard+drift (Whittle, autodiff pass), 50 000-70 000 frames", 50_000, 70_000,
+         ("standard+drift (Whittle), 50 000-70 000 frames", 50_000, 70_000,
           {"model": "standard+drift"})]
 
 
