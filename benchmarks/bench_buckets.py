@@ -13,8 +13,8 @@ time of a recording of that size (the warm time is measured on each recording by
 call). Two cases: 50 000-70 000 frames (default likelihood: Whittle) and 3000-5000 frames
 with ``likelihood="exact"`` (``--cases 0,1``, the default), 40 000-1 100 000 frames
 (Whittle, ``--cases 2``: many buckets), and a model with an effect, ``standard+drift``
-(Whittle, the fused pass with drift added since fd297e8, autodiff before; 50 000-70 000 frames, ``--cases 3``). No persistent
-compilation cache is enabled.
+(Whittle, the fused pass with drift added since fd297e8, autodiff before; 50 000-70 000
+frames, ``--cases 3``). No persistent compilation cache is enabled.
 
 Run: ``python benchmarks/bench_buckets.py [--base DIR] [--count 10]`` where ``DIR`` holds
 another tree of the package (e.g. ``git worktree add --detach DIR main``); each tree runs in

@@ -38,7 +38,6 @@ from ._chunked import (
     ordinate_chunks,
 )
 from ._exact_chunks import exact_chunk_pass
-from ._whittle_pass import _fused_pass_applies as fused_pass_applies
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
     FdObjective,
@@ -48,6 +47,7 @@ from ._newton import (
     newton_iterate,
     newton_minimise,
 )
+from ._whittle_pass import _fused_pass_applies as fused_pass_applies
 
 #: Newton iterations before giving up (the BFGS fallback takes over)
 NEWTON_STEPS = 64
