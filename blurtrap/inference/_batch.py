@@ -96,7 +96,8 @@ def calibrate_batch(
     Items are independent: each has its own ``status`` and a failing item never aborts
     the batch (its errors are NaN). Uses the Whittle likelihood (``n_blocks=1``, the
     default of :func:`calibrate` for long records) or the blocked-PSD Gamma likelihood
-    (``n_blocks > 1``) with the given model. It stays Whittle where ``calibrate``'s default
+    (``n_blocks > 1``) with the given core model (one with effects is refused with a
+    ``ValueError``: use :func:`calibrate`). It stays Whittle where ``calibrate``'s default
     would switch to the exact likelihood (records of <= 2^14 frames, or tau not short
     compared with the record).
     All rows share ``frame_interval`` [s], ``exposure`` [s] and ``temperature`` [K].
@@ -149,6 +150,12 @@ def calibrate_batch(
     y, m, gof_threshold = _check_batch(positions, n_blocks, check_units, gof_threshold)
     b, n = y.shape
     mdl = get_model(model)
+    if mdl.extra:
+        raise ValueError(
+            f"calibrate_batch fits the core models (naive, naive_aliased, blur, standard, "
+            f"photodiode_aa); model = {mdl.name!r} adds the effect(s) "
+            f"{', '.join(e.name for e in mdl.extra)}. Fit such rows with calibrate (one "
+            "Recording each, or a RecordingSet for a joint fit), or diagnose them first.")
     dt, w, t = float(frame_interval), float(exposure), float(temperature)
     checks.check_shared(dt, w, t, bool(check_units))
     _check_some_row_usable(y)

@@ -114,6 +114,16 @@ def test_empty_batch_is_a_clear_error():
         bt.calibrate_batch(np.zeros((0, 4096)), frame_interval=DT, exposure=DT)
 
 
+@pytest.mark.parametrize("model", ["standard+drift", "blur+line_noise"])
+def test_a_model_with_effects_is_a_clear_error(model):
+    """The batch fits the core models; a model with effects was a raw KeyError from inside
+    the compiled fit."""
+    x = ar1(K, 4096, 2, seed=4)
+    with pytest.raises(ValueError, match=r"calibrate_batch fits the core models.*"
+                       + model.split("+")[1] + r".*calibrate"):
+        bt.calibrate_batch(x, frame_interval=DT, exposure=DT, model=model)
+
+
 def test_inf_row_and_shared_unit_slips():
     x = ar1(K, 4096, 2, seed=4)
     x[0, 5] = -np.inf
