@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import blurtrap as bt
-from blurtrap.inference import _profile_host
+from blurtrap.inference import _profile, _profile_host
 
 DT = 1.0 / 1500.0
 GAMMA = 6 * np.pi * 0.00093 * 1.53e-6
@@ -31,11 +31,20 @@ def rec(y, w=0.1):
     return bt.Recording(y, frame_interval=DT, exposure=w * DT)
 
 
+def irregular(n, seed):
+    """Frames at jittered times (30 us per frame, independent of the frames): the exact
+    likelihood at the recorded times, whose pass has no chunks (the fit's pass is reused)."""
+    t = np.arange(n) * DT + np.random.default_rng(seed).normal(0.0, 3e-5, n)
+    return bt.Recording(frames(n, seed), frame_interval=float(np.median(np.diff(t))),
+                        exposure=0.1 * DT, times=t, allow_irregular=True)
+
+
 CASES = {
     "whittle": (lambda: rec(frames(20_000, 3)), {}),
     "exact": (lambda: rec(frames(3000, 4)), {"likelihood": "exact"}),
     "exact, gamma held": (lambda: rec(frames(4000, 5, 1.0, 2e-9), 1.0),
                           {"likelihood": "exact", "fixed": {"gamma": GAMMA}}),
+    "irregular times": (lambda: irregular(800, 7), {}),
 }
 
 
@@ -46,10 +55,16 @@ def test_host_profile_equals_the_compiled_program(monkeypatch, case):
     make, kw = CASES[case]
     data = make()
     out = {}
+    calls = []
+    host_ends = _profile.host_profile_ends
+    monkeypatch.setattr(_profile, "host_profile_ends",
+                        lambda *a: calls.append(1) or host_ends(*a))
     for host in (True, False):
         monkeypatch.setattr(_profile_host, "HOST", host)
+        calls.clear()
         res = bt.calibrate(data, **kw)
         out[host] = (res.intervals, res.interval_kinds)
+        assert bool(calls) == host  # the host loops ran, and only with HOST on
     assert out[True][1] == out[False][1]
     assert "profile" in out[True][1].values()
     for name, (lo, hi) in out[False][0].items():
