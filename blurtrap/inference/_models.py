@@ -65,8 +65,11 @@ class TrapModel(eqx.Module):
         """A new model with the given effects (canonical names, classes or instances) added.
         An instance's parameter values are dropped (the model holds structure; the fit starts
         from each parameter's start rule: pass ``start=`` or ``fixed=`` to ``calibrate`` to use
-        them); its configuration (``LineNoise(frequency=...)``) is kept."""
+        them); its configuration (``LineNoise(frequency=...)``) is kept. ``config`` goes to
+        the effects given by name or class that have such a setting (``add("drift",
+        "line_noise", frequency=50.0)``); a setting that none of them has is an error."""
         model = self
+        used: set[str] = set()
         for e in effects:
             name = e.name if isinstance(e, AbstractEffect) or isinstance(e, type) else e
             if name in _FLAGS:
@@ -75,7 +78,13 @@ class TrapModel(eqx.Module):
                                             noise=model.noise or name == "tracking_noise",
                                             name=f"{model.name}+{name}")
                 continue
-            eff = make_effect(e, **config).without_values()
+            cls = e if isinstance(e, type) else EFFECTS.get(name)
+            own = {}
+            if cls is not None and not isinstance(e, AbstractEffect):
+                own = {k: v for k, v in config.items()
+                       if k in {f.name for f in dataclasses.fields(cls)}}
+                used |= own.keys()
+            eff = make_effect(e, **own).without_values()
             if any(x.name == eff.name for x in model.extra):
                 raise ValueError(f"effect {eff.name!r} is already in the model")
             if eff.kind in ("histogram", "timestamps"):
@@ -90,6 +99,15 @@ class TrapModel(eqx.Module):
                 )
             model = dataclasses.replace(model, name=f"{model.name}+{eff.name}",
                                         extra=model.extra + (eff,))
+        unused = sorted(set(config) - used)
+        if unused:
+            names = [e.name if isinstance(e, (AbstractEffect, type)) else str(e)
+                     for e in effects]
+            raise ValueError(
+                f"{', '.join(unused)} is not a setting of the effect(s) added by name or "
+                f"class ({', '.join(names)}); an effect instance keeps its own settings "
+                "(for example LineNoise(frequency=50.0), settings of line_noise: frequency, "
+                "width)")
         return model
 
     def __add__(self, effect) -> TrapModel:

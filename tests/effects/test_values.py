@@ -69,6 +69,19 @@ def test_model_keeps_structure_not_values():
     assert get_model("naive").add(fx.TrackingNoise(tracking_var=1e-18)).noise
 
 
+def test_add_routes_settings_to_the_effects_that_have_them():
+    """Settings go to the named effects that have them (drift has no frequency: this was a
+    raw TypeError from Drift's constructor); a setting none of them has is an error naming
+    it (it was a TypeError, or ignored where the effect was an instance)."""
+    both = get_model("standard").add("drift", "line_noise", frequency=60.0, width=0.5)
+    want = get_model("standard+drift").add(fx.LineNoise(frequency=60.0, width=0.5))
+    assert both == want and both.effects[-2:] == ("drift", "line_noise")
+    with pytest.raises(ValueError, match="frequency is not a setting.*drift"):
+        get_model("standard").add("drift", frequency=60.0)
+    with pytest.raises(ValueError, match="frequency is not a setting.*line_noise"):
+        get_model("standard").add(fx.LineNoise(frequency=50.0), frequency=60.0)
+
+
 @pytest.mark.parametrize("effect, expected", [
     (fx.TrackingNoise(tracking_var=4e-18), inj.TrackingNoise(2e-9)),
     (fx.Drift(drift_diffusion=2e-16), inj.RandomWalkDrift(2e-16)),
