@@ -12,7 +12,7 @@ import numpy as np
 
 from .._config import float64_scope
 from ._assemble import _assemble, _interval_source, _k_mode_of
-from ._fit import fit_ml, fit_ml_fd_newton, fit_nll_only
+from ._fit import fit_ml, fit_ml_fd_newton
 from ._fixed import expand as expand_fixed
 from ._fixed import propagate as propagate_fixed
 from ._fixed import reduce as reduce_fixed
@@ -21,6 +21,7 @@ from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
 from ._refusals import _check_fit, _check_relaxation_resolved
+from ._screen_fit import fit_nll_only
 from ._spectral import _psd_jit, _spectral_args, spectral_gof, unpadded
 from ._starts import _start_vector
 

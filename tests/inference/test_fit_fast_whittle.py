@@ -223,7 +223,8 @@ def test_plan_only_for_the_closed_form_expected_periodogram():
     for model, n_blocks, want_plan, want_width in (
             (None, 1, True, 4),  # 8192 ordinates -> groups of 4
             (None, 128, True, None),  # 64 ordinates per block: no coarse stage
-            ("standard+drift", 1, False, None),  # effects: autodiff Newton
+            ("standard+drift", 1, True, None),  # additive effects: fused, no coarse stage
+            ("standard+hydrodynamics", 1, False, None),  # folded: autodiff Newton
             ("naive", 1, False, None)):  # no expected periodogram
         mdl = get_model(model)
         layout = make_layout(recs, "shared", mdl.noise, tuple(p.name for p in mdl.extra_params))

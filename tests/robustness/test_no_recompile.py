@@ -19,7 +19,7 @@ import pytest
 from _simconfig import DT, GAMMA, sim
 
 import blurtrap as bt
-from blurtrap.inference import _fit
+from blurtrap.inference import _screen_fit
 
 
 def test_counter_sees_compilations(compiles):
@@ -153,13 +153,13 @@ def test_diagnose_new_record_of_the_same_bucket_no_recompile(compiles):
 def test_diagnose_record_in_a_new_bucket_compiles_no_screening_fit(compiles, monkeypatch):
     """diagnose's screening fits (``fit_nll_only``) run the chunked Newton loop where it
     applies: after 40 000 frames (32 768 padded ordinates), a record of 70 000 (65 536)
-    compiles none of their programs. As BFGS (``_fit.SCREEN_CHUNKED = False``) they are
+    compiles none of their programs. As BFGS (``_screen_fit.SCREEN_CHUNKED = False``) they are
     compiled per padded length (2.6 s per candidate measured at 2^17 frames): the check can
     fail."""
     y = camera(5e-5, 70_000, 8)[0]
     programs = ("_bfgs", "_chunk_pass", "_update", "_start", "_finish", "_newton", "_coarse")
     for chunked in (True, False):
-        monkeypatch.setattr(_fit, "SCREEN_CHUNKED", chunked)
+        monkeypatch.setattr(_screen_fit, "SCREEN_CHUNKED", chunked)
         bt.diagnose(rec(y[:40_000]))
         compiles.reset()
         d = bt.diagnose(rec(y))
