@@ -24,7 +24,6 @@ import numpy as np
 from . import _chunked
 from ._exact_chunks import exact_chunk_pass
 from ._fit import at_lower_bound
-from ._newton import FdObjective
 
 #: profile intervals on the host over the chunked passes; False: the single compiled program
 #: of :func:`._profile._profile_ends` (one per padded length), the previous way
@@ -34,26 +33,11 @@ HOST = True
 def chunked_pass(nll, args, hessian, fd_step):
     """``pass(x, scale) -> (value, grad, hess)`` of ``nll`` in log parameters, summed over
     fixed-size chunks, or None where no chunked pass applies (other objectives; chunking or
-    the host loops off). A finite-difference objective whose pass has no chunks (the
-    irregular-time likelihood) gets its pass on the whole arguments: the program its fit's
-    host Newton loop compiled (:func:`._fit.fit_ml_fd_newton`), so its intervals compile
-    nothing more (the compiled interval program cost 8 s per padded length there, and ran
-    its lanes of forward-over-reverse passes for ~20 s at 5000 frames)."""
+    the host loops off)."""
     if not (HOST and _chunked.HOST_NEWTON):
         return None
     if hessian == "fd":
-        chunked = exact_chunk_pass(nll, args, fd_step)
-        if chunked is not None:
-            return chunked
-        obj = FdObjective(nll, fd_step)
-
-        def fd_pass_fn(x, scale):
-            n = x.shape[0]
-            acc = (jnp.zeros((), x.dtype), jnp.zeros((n,), x.dtype),
-                   jnp.zeros((n, n), x.dtype))
-            return _chunked._chunk_pass(obj, x, scale, args, acc)
-
-        return fd_pass_fn
+        return exact_chunk_pass(nll, args, fd_step)
     if hessian != "auto" or not _chunked.objective_chunkable(nll, args):
         return None
     chunks = _chunked.ordinate_chunks(args)

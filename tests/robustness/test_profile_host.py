@@ -31,20 +31,11 @@ def rec(y, w=0.1):
     return bt.Recording(y, frame_interval=DT, exposure=w * DT)
 
 
-def irregular(n, seed):
-    """Frames at jittered times (30 us per frame, independent of the frames): the exact
-    likelihood at the recorded times, whose pass has no chunks (the fit's pass is reused)."""
-    t = np.arange(n) * DT + np.random.default_rng(seed).normal(0.0, 3e-5, n)
-    return bt.Recording(frames(n, seed), frame_interval=float(np.median(np.diff(t))),
-                        exposure=0.1 * DT, times=t, allow_irregular=True)
-
-
 CASES = {
     "whittle": (lambda: rec(frames(20_000, 3)), {}),
     "exact": (lambda: rec(frames(3000, 4)), {"likelihood": "exact"}),
     "exact, gamma held": (lambda: rec(frames(4000, 5, 1.0, 2e-9), 1.0),
                           {"likelihood": "exact", "fixed": {"gamma": GAMMA}}),
-    "irregular times": (lambda: irregular(800, 7), {}),
 }
 
 
