@@ -70,8 +70,10 @@ class TrapModel(eqx.Module):
         "line_noise", frequency=50.0)``); a setting that none of them has is an error."""
         model = self
         used: set[str] = set()
+        names = []
         for e in effects:
             name = e.name if isinstance(e, AbstractEffect) or isinstance(e, type) else e
+            names.append(str(name))
             if name in _FLAGS:
                 model = dataclasses.replace(model, blur=model.blur or name == "motion_blur",
                                             alias=model.alias or name == "aliasing",
@@ -81,8 +83,8 @@ class TrapModel(eqx.Module):
             cls = e if isinstance(e, type) else EFFECTS.get(name)
             own = {}
             if cls is not None and not isinstance(e, AbstractEffect):
-                own = {k: v for k, v in config.items()
-                       if k in {f.name for f in dataclasses.fields(cls)}}
+                fields = {f.name for f in dataclasses.fields(cls)}
+                own = {k: v for k, v in config.items() if k in fields}
                 used |= own.keys()
             eff = make_effect(e, **own).without_values()
             if any(x.name == eff.name for x in model.extra):
@@ -101,8 +103,6 @@ class TrapModel(eqx.Module):
                                         extra=model.extra + (eff,))
         unused = sorted(set(config) - used)
         if unused:
-            names = [e.name if isinstance(e, (AbstractEffect, type)) else str(e)
-                     for e in effects]
             raise ValueError(
                 f"{', '.join(unused)} is not a setting of the effect(s) added by name or "
                 f"class ({', '.join(names)}); an effect instance keeps its own settings "
@@ -198,10 +198,14 @@ class TrapModel(eqx.Module):
             out = folded_on_nodes(folded, f, self.fold_nodes) + col(e2 * dt)
         else:
             out = self._psd_folded(f, sigma2, tau, w, dt, temperature, extras) + col(e2 * dt)
-        for e in self.extra:
-            if e.kind == "additive":
-                out = out + e.psd_add(f, col(dt), extras)
-        return out
+        return out + self.additive_psd(f, col(dt), extras)
+
+    def additive_psd(self, f, dt, extras):
+        """The summed spectrum of the additive effects (drift, lines) at ``f`` (0 without
+        any): what :meth:`psd` adds to every model, and what the fused Whittle pass
+        differentiates (``_whittle_pass._additive_spectrum``)."""
+        return sum((e.psd_add(f, dt, extras) for e in self.extra if e.kind == "additive"),
+                   0.0)
 
     def _psd_folded(self, f, sigma2, tau, w, dt, temperature, extras):
         hydro = next((e for e in self.extra if e.kind == "friction"), None)

@@ -10,7 +10,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import optimistix as optx
 
-from ._chunked import chunked_applies
+from ._chunked import objective_chunkable
 from ._fit import _bfgs, _chunked_newton
 from ._whittle_pass import _fused_pass_applies as fused_pass_applies
 
@@ -31,13 +31,13 @@ def _bfgs_value_only(nll, scale, args, rtol, atol, max_steps):
 
 def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=400):
     """Minimum of ``nll``: ``(p, nll, ok)``, for screening many candidate models where only
-    the likelihood ratio is needed. Where the chunked Newton fit applies with the fused pass
-    (:func:`._chunked.chunked_applies`: the core model and additive effects) it runs first,
+    the likelihood ratio is needed. Where the Whittle objective runs in chunks with the fused
+    pass (the core model and additive effects) the chunked Newton loop runs first,
     so that a record in a new power-of-two bucket compiles no screening program (BFGS was
     compiled per padded length: ~2.6 s per candidate model at 2^17 frames); elsewhere, or
     where Newton fails, BFGS (no Hessian: cheaper than Newton with autodiff Hessians of a
     folded model, measured 2.1 -> 5.7 s warm on five 65 536-frame records)."""
-    if SCREEN_CHUNKED and chunked_applies(nll, args) and fused_pass_applies(args):
+    if SCREEN_CHUNKED and objective_chunkable(nll, args) and fused_pass_applies(args):
         out = _chunked_newton(nll, scale, args, rtol, atol, value_atol=SCREEN_NLL_ATOL)
         if bool(out.converged) and bool(out.hessian_pd):
             return out.value, float(out.nll), True

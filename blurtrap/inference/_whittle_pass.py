@@ -121,9 +121,8 @@ def _additive_spectrum(x, scale, a: SpectralArgs):
     dt = (a.meta.dt * jnp.ones(a.f.shape[:-1], a.f.dtype))[:, None]
 
     def spectrum(xe):
-        p = scale[n0:] * jnp.exp(xe)
-        extras = dict(zip(a.layout.extra_names, p))
-        return sum(e.psd_add(a.f, dt, extras) for e in a.model.extra)
+        extras = a.layout.unpack_extras(scale * jnp.exp(x.at[n0:].set(xe)))
+        return a.model.additive_psd(a.f, dt, extras)
 
     xe = x[n0:]
     d1 = jax.jacfwd(spectrum)
