@@ -58,6 +58,10 @@ _FD_STEP = 1e-4
 #: a profile fit whose remaining decrease along a direction running into a bound is below
 #: ~1e-7 nats (far below the 4e-4 root tolerance) is converged
 _FLAT_ATOL = 1e-7
+#: a free parameter running to its bound in a profile fit is sent in one step to where its
+#: remaining decrease is ~1e-9 nats (``SafeguardedNewton.jump_atol``), instead of one log
+#: unit per pass
+_JUMP_ATOL = 1e-9
 
 
 def fd_pass(nll, h=_FD_STEP):
@@ -102,7 +106,8 @@ def _fit_held(held, scale, args, mask, t, x0, x_lift, tol=1e-9):
     def run(x_start):
         x, v, g, h, dx, _, done, _ = _newton_iterate(held, scale, (args, mask, t), x_start,
                                                      tol, tol, _NEWTON_STEPS,
-                                                     flat_atol=_FLAT_ATOL)
+                                                     flat_atol=_FLAT_ATOL,
+                                                     jump_atol=_JUMP_ATOL)
         trapped = at_lower_bound(g, h) & ~mask
         return v - 0.5 * jnp.dot(g, dx), jnp.where(mask, t, x - dx), done, trapped
 
@@ -251,7 +256,7 @@ def _wald_path_roots(nll, args, value, cov):
 def _consts():
     return {"z95": Z95, "drop": DROP, "log_zero": _LOG_ZERO, "root_tol": _ROOT_TOL,
             "root_steps": _ROOT_STEPS, "newton_steps": _NEWTON_STEPS, "tol": 1e-9,
-            "flat_atol": _FLAT_ATOL}
+            "flat_atol": _FLAT_ATOL, "jump_atol": _JUMP_ATOL}
 
 
 def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):

@@ -1,7 +1,7 @@
 """Profile-likelihood intervals with every loop on the host, for the objectives whose pass
 runs in fixed-size chunks (the Whittle objective in ordinate chunks, :mod:`._chunked`; the
-exact likelihood in frame chunks, :mod:`._exact_chunks`): a recording of a new length then
-compiles nothing for its intervals either (the single program of
+exact and irregular-time likelihoods in frame chunks, :mod:`._exact_chunks`): a recording of
+a new length then compiles nothing for its intervals either (the single program of
 :func:`._profile._profile_ends` cost 5-6 s per new power-of-two bucket at 4096 frames
 exact and 65 536 frames Whittle, and ran every lane for as long as the slowest).
 
@@ -88,7 +88,8 @@ class _HeldFits:
 
         tol = self.c["tol"]
         st, _ = _chunked.host_newton_loop(held, jnp.asarray(x_start), tol, tol,
-                                          self.c["newton_steps"], self.c["flat_atol"])
+                                          self.c["newton_steps"], self.c["flat_atol"],
+                                          jump_atol=self.c["jump_atol"])
         g, dx = np.asarray(st.grad), np.asarray(st.step)
         trapped = np.asarray(at_lower_bound(st.grad, st.hess)) & ~mask
         return (float(st.value) - 0.5 * float(g @ dx),

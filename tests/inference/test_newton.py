@@ -143,3 +143,32 @@ def test_fd_newton_fit_agrees_with_the_exact_hessian_fit_and_scipy():
     np.testing.assert_allclose(np.asarray(fd.value), [a, 1 / sc], rtol=1e-4)
     np.testing.assert_allclose(np.asarray(fd.value), np.asarray(ad.value), rtol=1e-8)
     np.testing.assert_allclose(np.asarray(fd.cov), np.asarray(ad.cov), rtol=1e-6)
+
+
+def _bound_objective(p, args):
+    """``a/2 (u0 - 1 - rho u1)^2 + c u1 + u0^2/20`` over u = p > 0: u1's minimum is at its
+    bound 0 (c > 0 beats the coupling), where u0 = 1/(1 + 1/(10 a)) exactly."""
+    a, rho, c = 40.0, 0.8, 3.0
+    return 0.5 * a * (p[0] - 1.0 - rho * p[1]) ** 2 + c * p[1] + p[0] ** 2 / 20.0
+
+
+@pytest.mark.parametrize("jump", [1e-9, 0.0])
+def test_a_parameter_running_to_its_bound_is_sent_there_at_once(jump):
+    """With ``jump_atol`` the coordinate whose log-space gradient and curvature agree (linear
+    in natural units, minimum below 0) is moved to where its remaining decrease is ~1e-9 in
+    one step, the other one corrected for the coupling: from u = (1.02, 0.02) converged to the
+    bound optimum in at most 4 passes. Without it the same fit walks one log unit per pass (> 12 passes); both end
+    at the same optimum (u0 to 1e-9, value to 1e-8)."""
+    scale = jnp.asarray([1.0, 1.0])
+    x0 = jnp.log(jnp.asarray([1.02, 0.02]))
+    fn = _fit._autodiff_pass(FunctionObjective(_bound_objective))
+    sol = newton_minimise(fn, scale, None, x0, 1e-9, 1e-9, 60, flat_atol=1e-7, jump_atol=jump)
+    st = sol.state
+    assert bool(st.done)
+    u = np.exp(np.asarray(sol.value))
+    a = 40.0
+    u0 = 1.0 / (1.0 + 1.0 / (10.0 * a))
+    assert abs(u[0] - u0) < 1e-9 and u[1] < 1e-7
+    best = float(_bound_objective(jnp.asarray([u0, 0.0]), None))
+    assert float(st.value) - best < 1e-8
+    assert (int(st.n_steps) <= 4) if jump else (int(st.n_steps) > 12), int(st.n_steps)
