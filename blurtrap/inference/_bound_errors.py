@@ -27,26 +27,48 @@ import numpy as np
 _PD_RTOL = 1e-10
 #: finite-difference step (natural parameters in units of ``s``) of the ``fd`` Hessian
 _FD_STEP = 1e-4
+#: a bound parameter's difference Hessian is trusted when its curvature is at least this
+#: fraction of its gradient (both in units of ``s``): the gradient difference over the step
+#: is then ~1e-10 of the gradient, far above rounding (~1e-16)
+_FD_SIGNAL = 1e-6
+#: otherwise its unit is widened by this factor and the Hessian evaluated again (at most
+#: ``_FD_WIDEN_PASSES`` times): a start value of ~1e-28 m^2 for eps^2 made its step rounding
+#: noise, and the curvature scale from it meaningless
+_FD_WIDEN = 1e4
+_FD_WIDEN_PASSES = 8
 
 
-def natural_hessian(nll, value, args, s, at_bound, fd=False):
+def natural_hessian(nll, value, args, s, at_bound, fd=False, with_grad=False):
     """Hessian of ``nll`` with respect to ``u = p / s`` at ``p = value``. By autodiff, or with
     ``fd`` by differences of the exact autodiff gradient (for objectives whose second-order
     graph is expensive to compile): central in the interior, second-order one-sided
     ``(-3 g(u) + 4 g(u + h) - g(u + 2h)) / 2h`` upwards for a parameter at its bound (no
-    evaluation below its estimate ~0); error O(h^2) ~ 1e-8 relative. Pure JAX (vmappable)."""
+    evaluation below its estimate ~0); error O(h^2) ~ 1e-8 relative. Pure JAX (vmappable).
+    With ``with_grad``: ``(Hessian, gradient)``."""
     u = value / s
 
     def f(v):
         return nll(s * v, args)
 
     if not fd:
-        return jax.hessian(f)(u)
+        h = jax.hessian(f)(u)
+        return (h, jax.grad(f)(u)) if with_grad else h
+    g = jax.vmap(jax.grad(f))(_fd_points(u, at_bound))
+    h = _fd_assemble(g, at_bound)
+    return (h, g[0]) if with_grad else h
+
+
+def _fd_points(u, at_bound):
+    """``u``, ``u + h e_i`` and ``u - h e_i`` (``u + 2h e_i`` for a parameter at its bound)."""
     n = u.shape[0]
     eye = jnp.eye(n, dtype=u.dtype) * _FD_STEP
     back = jnp.where(at_bound[:, None], -2 * eye, eye)  # at the bound: u - back = u + 2h
-    pts = jnp.concatenate([u[None], u[None] + eye, u[None] - back])
-    g = jax.vmap(jax.grad(f))(pts)
+    return jnp.concatenate([u[None], u[None] + eye, u[None] - back])
+
+
+def _fd_assemble(g, at_bound):
+    """The difference Hessian from the gradients ``g`` at :func:`_fd_points`."""
+    n = g.shape[1]
     g0, gp, gm = g[0], g[1:1 + n], g[1 + n:]
     central = (gp - gm) / (2 * _FD_STEP)
     one_sided = (-3 * g0[None] + 4 * gp - gm) / (2 * _FD_STEP)
@@ -101,41 +123,57 @@ def cov_from_hessian(h, s, at_bound):
     return np.where(pd[..., None, None], cov, np.nan), pd
 
 
-def unconstrained_cov(nll, value, args, scale, at_bound, fd=False, parts=None):
+def unconstrained_cov(nll, value, args, scale, at_bound, fd=False, parts=None, grads=None):
     """``(cov, pd)``: the inverse of the full observed information in natural parameters at
     ``value``, every parameter free, the bound ones included (they can move both ways;
-    conservative near the bound), from :func:`natural_hessian` (with ``fd`` a first pass
-    sets the bound parameters' difference step, :func:`rescaled_units`); see
+    conservative near the bound), from :func:`natural_hessian` (with ``fd`` first passes
+    set the bound parameters' difference step: widened until their curvature stands above
+    rounding, ``_FD_SIGNAL``, then :func:`rescaled_units`); see
     :func:`cov_from_hessian`. On the host; one jitted Hessian per pass. ``parts``: pieces of
     ``args`` whose objectives sum to ``nll`` on ``args`` (e.g. ordinate chunks, so that a new
-    record length compiles no Hessian program); their Hessians are summed."""
+    record length compiles no Hessian program); their Hessians are summed. ``grads`` (with
+    ``fd``): ``grads(xs, s) -> (values, gradients in x)`` of ``nll(s exp(x))`` at points
+    ``xs`` (the frame chunks of :func:`._exact_chunks.exact_chunk_grads`: no Hessian program
+    per record length); the natural gradient at ``u = exp(x)`` is the one in ``x`` over ``u``."""
     at_bound = np.asarray(at_bound, bool)
     parts = [args] if parts is None else parts
 
-    def hess(s):
-        return sum(np.asarray(_natural_hessian_jit(nll, jnp.asarray(value), a, jnp.asarray(s),
-                                                   jnp.asarray(at_bound), bool(fd)))
-                   for a in parts)
+    def hess(s):  # (Hessian, gradient) in units of s
+        if fd and grads is not None:
+            u = np.asarray(_fd_points(jnp.asarray(value / s), jnp.asarray(at_bound)))
+            if np.all(u > 0):
+                g = np.asarray(grads(jnp.asarray(np.log(u)), jnp.asarray(s))[1]) / u
+                return np.asarray(_fd_assemble(jnp.asarray(g), jnp.asarray(at_bound))), g[0]
+        out = [_natural_hessian_jit(nll, jnp.asarray(value), a, jnp.asarray(s),
+                                    jnp.asarray(at_bound), bool(fd), True) for a in parts]
+        return (sum(np.asarray(o[0]) for o in out), sum(np.asarray(o[1]) for o in out))
 
     s = bound_units(scale, value, at_bound)
-    h = hess(s)
+    h, g = hess(s)
     if fd:
+        for _ in range(_FD_WIDEN_PASSES):  # a bound parameter's step above rounding first
+            d = np.diagonal(h)
+            narrow = at_bound & ~(d > _FD_SIGNAL * np.abs(g))
+            if not narrow.any():
+                break
+            s = np.where(narrow, s * _FD_WIDEN, s)
+            h, g = hess(s)
         s = rescaled_units(s, h, at_bound)
-        h = hess(s)
+        h, _ = hess(s)
     return cov_from_hessian(h, s, at_bound)
 
 
-def release_bound(nll, scale, args, out, fd=False, parts=None):
+def release_bound(nll, scale, args, out, fd=False, parts=None, grads=None):
     """``out`` (a ``FitOutput``) with the errors of the parameters not at a bound replaced
     by the unconstrained ones (:func:`unconstrained_cov`) when some parameter is at its bound;
     the conditional covariance kept in ``cov_given_bound``. Where the full information is not positive
     definite ``cov`` stays conditional and ``conditional`` is True. Decided on the host after
-    the fit: nothing is computed when no parameter is at a bound. ``parts``: see
+    the fit: nothing is computed when no parameter is at a bound. ``parts``, ``grads``: see
     :func:`unconstrained_cov`."""
     if out.at_bound is None or not bool(jnp.any(out.at_bound)) or not bool(out.hessian_pd):
         return out
     cov, pd = unconstrained_cov(nll, np.asarray(out.value), args, np.asarray(scale),
-                                np.asarray(out.at_bound), fd, parts)
+                                np.asarray(out.at_bound), fd, parts, grads)
     new = jnp.asarray(cov) if bool(pd) else out.cov
     return dataclasses.replace(out, cov=new, cov_given_bound=out.cov,
                                conditional=jnp.asarray(not bool(pd)))

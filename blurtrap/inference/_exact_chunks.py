@@ -21,8 +21,14 @@ and its shapes are (points, recordings, ``FRAME_CHUNK + 1``): a new record lengt
 Chunks past every recording's last frame are not run; a partly filled last chunk has mask 0
 on its padding, which adds exactly 0 (the recursion is causal).
 
-Applies to ``exact_nll`` on :class:`._problems.ExactArgs` and to its reduced objective with
-held parameters (``calibrate(..., fixed=...)``); anything else keeps the compiled pass.
+The irregular-time likelihood (:mod:`._irregular`, frames at recorded times) runs the same
+way (:class:`IrregularChunk`): its Kalman filter continues from the carried state mean and
+variance, each chunk carries its frames' intervals, and its per-recording parameters are
+``(sigma^2, tau, eps^2)``.
+
+Applies to ``exact_nll`` on :class:`._problems.ExactArgs` and ``irregular_nll`` on
+:class:`._irregular.IrregularArgs`, and to their reduced objectives with held parameters
+(``calibrate(..., fixed=...)``); anything else keeps the compiled pass.
 """
 
 from __future__ import annotations
@@ -32,7 +38,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._likelihood import _LOG2PI, _affine_scan, innovation_variances_at
+from . import _irregular
+from ._irregular import IrregularArgs, frame_params, irregular_nll
+from ._likelihood import _affine_scan, gls_loglik, innovation_variances_at
 from ._problems import ExactArgs, exact_nll
 
 #: frames per chunk (a power of two); ``None`` turns the chunked pass off (one compiled pass
@@ -50,18 +58,36 @@ class FrameChunk(eqx.Module):
     m: jax.Array  # (R, FRAME_CHUNK + 1): 1 on real frames, 0 before the first and on padding
     t0: jax.Array  # frames before the chunk (float scalar: one program for every chunk)
 
+    def records(self):
+        """The per-recording data (leading axis R)."""
+        return self.y, self.m
+
+    def step(self, theta, carry, rec, mean):
+        return _step(theta, carry, rec[0], rec[1], self.t0, mean)
+
+
+class IrregularChunk(eqx.Module):
+    """One chunk of frames at irregular times of R recordings (no frame before it: the
+    filter's carried state is the prediction for its first frame)."""
+
+    y: jax.Array  # (R, FRAME_CHUNK): centred frames (mean != "zero"), 0 on padding
+    m: jax.Array  # (R, FRAME_CHUNK): 1 on real frames, 0 on padding
+    d: jax.Array  # (R, FRAME_CHUNK): interval to the next frame [s]
+    w: jax.Array  # (R,): exposure [s] (0 without blur)
+
+    def records(self):
+        return self.y, self.m, self.d, self.w
+
+    def step(self, theta, carry, rec, mean):
+        return _irregular.chunk_step(theta, carry, *rec, mean)
+
 
 def frame_chunks(a: ExactArgs, size: int) -> list[FrameChunk]:
     """The frames of ``a`` cut into consecutive chunks of ``size`` (the last padded with
     mask 0; the bucket padding after every recording's last frame left out). For the
     profiled and restricted means the frames are centred on their mean first (on the host, as
     :func:`._likelihood.arma_loglik` does in the graph: both are shift-invariant)."""
-    ys, mask = np.asarray(a.ys, dtype=float), np.asarray(a.mask, dtype=float)
-    if a.mean != "zero":
-        n = np.sum(mask, axis=-1, keepdims=True)
-        ys = (ys - np.sum(mask * ys, axis=-1, keepdims=True) / n) * mask
-    real = np.flatnonzero(np.any(mask != 0, axis=0))
-    n_used = int(real[-1]) + 1 if real.size else 1
+    ys, mask, n_used = _centred(a)
     n_chunks = -(-n_used // size)
     width = n_chunks * size + 1  # a zero column first: "the frame before" the first chunk
     y = np.zeros((ys.shape[0], width))
@@ -70,6 +96,32 @@ def frame_chunks(a: ExactArgs, size: int) -> list[FrameChunk]:
     return [FrameChunk(y=jnp.asarray(y[:, i * size:(i + 1) * size + 1]),
                        m=jnp.asarray(m[:, i * size:(i + 1) * size + 1]),
                        t0=jnp.asarray(float(i * size)))
+            for i in range(n_chunks)]
+
+
+def _centred(a):
+    """Frames (centred on their mean unless ``a.mean`` is "zero", as the likelihoods do in
+    the graph: both are shift-invariant), mask, and frames up to the last real one."""
+    ys, mask = np.asarray(a.ys, dtype=float), np.asarray(a.mask, dtype=float)
+    if a.mean != "zero":
+        n = np.sum(mask, axis=-1, keepdims=True)
+        ys = (ys - np.sum(mask * ys, axis=-1, keepdims=True) / n) * mask
+    real = np.flatnonzero(np.any(mask != 0, axis=0))
+    return ys, mask, int(real[-1]) + 1 if real.size else 1
+
+
+def irregular_chunks(a: IrregularArgs, size: int, w) -> list[IrregularChunk]:
+    """The frames and intervals of ``a`` in consecutive chunks of ``size`` (as
+    :func:`frame_chunks`), ``w`` the exposure per recording."""
+    ys, mask, n_used = _centred(a)
+    n_chunks = -(-n_used // size)
+    width = n_chunks * size
+    y, m, d = np.zeros((ys.shape[0], width)), np.zeros((ys.shape[0], width)), np.ones(
+        (ys.shape[0], width))
+    y[:, :n_used], m[:, :n_used] = ys[:, :n_used], mask[:, :n_used]
+    d[:, :n_used] = np.asarray(a.intervals, dtype=float)[:, :n_used]
+    w = jnp.asarray(w)
+    return [IrregularChunk(*(jnp.asarray(z[:, i * size:(i + 1) * size]) for z in (y, m, d)), w=w)
             for i in range(n_chunks)]
 
 
@@ -105,15 +157,9 @@ def _step(theta, carry, y, m, t0, mean):
 
 
 def _loglik(carry, n, mean):
-    """The log-likelihood of :func:`._likelihood.arma_loglik` from the final carry (``n``
-    real frames)."""
-    slogv, syy, s1y, s11 = carry[2], carry[3], carry[4], carry[5]
-    if mean == "zero":
-        return -0.5 * (n * _LOG2PI + slogv + syy)
-    ll = -0.5 * (n * _LOG2PI + slogv + (syy - s1y * s1y / s11))
-    if mean == "reml":
-        ll = ll - 0.5 * jnp.log(s11) + 0.5 * _LOG2PI
-    return ll
+    """The log-likelihood from a final carry (its last four entries are the sums of
+    :func:`._likelihood.gls_loglik`; ``n`` real frames)."""
+    return gls_loglik(n, carry[-4], carry[-3], carry[-2], carry[-1], mean)
 
 
 def _with_tangents(fn, theta, carry, dcarry):
@@ -125,29 +171,44 @@ def _with_tangents(fn, theta, carry, dcarry):
 
 
 @eqx.filter_jit
-def _chunk_jvp(theta, carry, dcarry, chunk: FrameChunk, mean: str):
-    """Carries and their tangents after ``chunk``: ``theta`` (P, R, 3) at P points,
-    ``carry`` (P, R, 6), ``dcarry`` (P, R, 3, 6)."""
+def _chunk_jvp(theta, carry, dcarry, chunk, mean: str):
+    """Carries and their tangents after ``chunk`` (a :class:`FrameChunk` or
+    :class:`IrregularChunk`): ``theta`` (P, R, 3) at P points, ``carry`` (P, R, C),
+    ``dcarry`` (P, R, 3, C)."""
 
-    def one(th, ca, dca, y, m):
-        return _with_tangents(lambda a, b: _step(a, b, y, m, chunk.t0, mean), th, ca, dca)
+    def one(th, ca, dca, rec):
+        return _with_tangents(lambda a, b: chunk.step(a, b, rec, mean), th, ca, dca)
 
-    per_rec = jax.vmap(one, in_axes=(0, 0, 0, 0, 0))
-    return jax.vmap(per_rec, in_axes=(0, 0, 0, None, None))(theta, carry, dcarry, chunk.y,
-                                                             chunk.m)
+    per_rec = jax.vmap(one, in_axes=(0, 0, 0, 0))
+    return jax.vmap(per_rec, in_axes=(0, 0, 0, None))(theta, carry, dcarry, chunk.records())
+
+
+def _held_p(x, scale, held):
+    p = scale * jnp.exp(x)
+    if held is not None:
+        full, free = held
+        p = full.at[jnp.asarray(free)].set(p)
+    return p
 
 
 def _moments(x, scale, small: ExactArgs, held):
     """``(C(0), C(1), rho)`` per recording, shape (R, 3), at ``p = scale exp(x)`` (the held
     parameters inserted where ``held = (full, free)``), as in ``exact_nll``."""
-    p = scale * jnp.exp(x)
-    if held is not None:
-        full, free = held
-        p = full.at[jnp.asarray(free)].set(p)
-    k_rec, gamma, eps2 = small.layout.unpack(p)
+    k_rec, gamma, eps2 = small.layout.unpack(_held_p(x, scale, held))
     c0, c1, rho = small.model.moments(k_rec, gamma, eps2, small.meta.dt, small.meta.w,
                                       small.meta.temp)
     return jnp.stack(jnp.broadcast_arrays(c0, c1, rho), axis=-1)
+
+
+def _irregular_theta(x, scale, small: IrregularArgs, held):
+    """``(sigma^2, tau, eps^2)`` per recording, shape (R, 3), as in ``irregular_nll``."""
+    sigma2, tau, _, e2 = frame_params(_held_p(x, scale, held), small.layout, small.model,
+                                      small.meta)
+    return jnp.stack([sigma2, tau, e2], axis=-1)
+
+
+def _theta_fn(small):
+    return _irregular_theta if isinstance(small, IrregularArgs) else _moments
 
 
 def _points(x, h):
@@ -156,19 +217,24 @@ def _points(x, h):
     return jnp.concatenate([x[None], x[None] + eye, x[None] - eye])
 
 
-@eqx.filter_jit
-def _start(x, scale, small, held, h):
-    """The moments at every point and the zero carries."""
-    theta = jax.vmap(_moments, in_axes=(0, None, None, None))(_points(x, h), scale, small, held)
+def _start_at(pts, scale, small, held):
+    """The per-recording parameters at the points ``pts`` (P, n) and the initial carries
+    (zero tangents)."""
+    theta = jax.vmap(_theta_fn(small), in_axes=(0, None, None, None))(pts, scale, small, held)
     p, r = theta.shape[:2]
-    return theta, jnp.zeros((p, r, _N_CARRY), x.dtype), jnp.zeros((p, r, 3, _N_CARRY), x.dtype)
+    if isinstance(small, IrregularArgs):
+        c0 = _irregular.initial_carry(pts.dtype)
+    else:
+        c0 = jnp.zeros(_N_CARRY, pts.dtype)
+    n_c = c0.shape[0]
+    return theta, jnp.broadcast_to(c0, (p, r, n_c)), jnp.zeros((p, r, 3, n_c), pts.dtype)
 
 
-@eqx.filter_jit
-def _finish(x, scale, small, held, h, carry, dcarry, n_frames):
-    """Value, gradient and difference Hessian of ``exact_nll(scale exp(x))`` from the final
-    carries (as :func:`._newton.fd_hessian_pass` assembles them)."""
+def _finish_at(pts, scale, small, held, carry, dcarry, n_frames):
+    """Values and gradients in ``x`` of the objective at the points ``pts`` from the final
+    carries."""
     mean = small.mean
+    theta_fn = _theta_fn(small)
 
     def ll_rec(ca, dca, n):
         ll, dll = _with_tangents(lambda th, c: _loglik(c, n, mean), jnp.zeros(3, ca.dtype),
@@ -179,46 +245,107 @@ def _finish(x, scale, small, held, h, carry, dcarry, n_frames):
         carry, dcarry, n_frames)  # (P, R), (P, R, 3)
 
     def value_grad(pt, ll_p, dll_p):
-        _, vjp = jax.vjp(lambda z: _moments(z, scale, small, held), pt)
+        _, vjp = jax.vjp(lambda z: theta_fn(z, scale, small, held), pt)
         return -jnp.sum(ll_p), vjp(-dll_p)[0]
 
-    vals, grads = jax.vmap(value_grad)(_points(x, h), ll, dll)
+    return jax.vmap(value_grad)(pts, ll, dll)
+
+
+@eqx.filter_jit
+def _start(x, scale, small, held, h):
+    """:func:`_start_at` the points of the difference Hessian at ``x``."""
+    return _start_at(_points(x, h), scale, small, held)
+
+
+@eqx.filter_jit
+def _finish(x, scale, small, held, h, carry, dcarry, n_frames):
+    """Value, gradient and difference Hessian of the objective at ``scale exp(x)`` from the
+    final carries (as :func:`._newton.fd_hessian_pass` assembles them)."""
+    vals, grads = _finish_at(_points(x, h), scale, small, held, carry, dcarry, n_frames)
     n = x.shape[0]
     hess = (grads[1:1 + n] - grads[1 + n:]) / (2 * h)
     return vals[0], grads[0], 0.5 * (hess + hess.T)
 
 
+_start_at_jit = eqx.filter_jit(_start_at)
+_finish_at_jit = eqx.filter_jit(_finish_at)
+
+
+_LIKELIHOODS = ((exact_nll, ExactArgs), (irregular_nll, IrregularArgs))
+
+
 def _split(nll, args):
-    """``(exact args, held)`` where the chunked pass applies to ``nll`` and ``args``, else
-    None."""
-    if nll is exact_nll and isinstance(args, ExactArgs):
-        return args, None
+    """``(args of the likelihood, held)`` where the chunked pass applies to ``nll`` and
+    ``args``, else None."""
+    for base, kind in _LIKELIHOODS:
+        if nll is base and isinstance(args, kind):
+            return args, None
     from ._fixed import _REDUCED, FixedArgs  # imports this package's _fit: not at the top
 
-    if (isinstance(args, FixedArgs) and isinstance(args.inner, ExactArgs)
-            and _REDUCED.get(exact_nll) is nll):
-        return args.inner, (args.full, args.free)
+    if isinstance(args, FixedArgs):
+        for base, kind in _LIKELIHOODS:
+            if isinstance(args.inner, kind) and _REDUCED.get(base) is nll:
+                return args.inner, (args.full, args.free)
     return None
 
 
-def exact_chunk_pass(nll, args, h):
-    """The finite-difference Newton pass ``(x, scale) -> (value, grad, hess)`` of ``nll``
-    (``exact_nll``, or its reduced objective with held parameters) in frame chunks, or None
-    where it does not apply (other objectives, or :data:`FRAME_CHUNK` None)."""
+class _FrameChunks:
+    """The frames of one objective in chunks: ``run(start, finish)`` carries them through."""
+
+    def __init__(self, ex, held, size):
+        self.ex, self.held = ex, held
+        self.n_frames = jnp.asarray(np.sum(np.asarray(ex.mask, dtype=float), axis=-1))
+        empty = jnp.zeros((ex.ys.shape[0], 0), ex.ys.dtype)
+        if isinstance(ex, IrregularArgs):
+            w = np.broadcast_to(np.asarray(_irregular.exposures(ex.model, ex.meta), float),
+                                (ex.ys.shape[0],))
+            self.chunks = irregular_chunks(ex, size, w)
+            self.small = eqx.tree_at(lambda a: (a.ys, a.mask, a.intervals), ex,
+                                     (empty, empty, empty))
+        else:
+            self.chunks = frame_chunks(ex, size)
+            # no frames: no shape
+            self.small = eqx.tree_at(lambda a: (a.ys, a.mask), ex, (empty, empty))
+
+    def run(self, start, finish, x, scale, *extra):
+        theta, carry, dcarry = start(x, scale, self.small, self.held, *extra)
+        for c in self.chunks:
+            carry, dcarry = _chunk_jvp(theta, carry, dcarry, c, self.ex.mean)
+        return finish(x, scale, self.small, self.held, *extra, carry, dcarry, self.n_frames)
+
+
+def _frame_chunks_of(nll, args):
     size = FRAME_CHUNK
     split = None if size is None else _split(nll, args)
     if split is None or size is None:
         return None
-    ex, held = split
-    chunks = frame_chunks(ex, size)
-    n_frames = jnp.asarray(np.sum(np.asarray(ex.mask, dtype=float), axis=-1))
-    empty = jnp.zeros((ex.ys.shape[0], 0), ex.ys.dtype)
-    small = eqx.tree_at(lambda a: (a.ys, a.mask), ex, (empty, empty))  # no frames: no shape
+    return _FrameChunks(*split, size)
+
+
+def exact_chunk_pass(nll, args, h):
+    """The finite-difference Newton pass ``(x, scale) -> (value, grad, hess)`` of ``nll``
+    (``exact_nll`` or ``irregular_nll``, or their reduced objectives with held parameters)
+    in frame chunks, or None where it does not apply (other objectives, or
+    :data:`FRAME_CHUNK` None)."""
+    ch = _frame_chunks_of(nll, args)
+    if ch is None:
+        return None
 
     def pass_fn(x, scale):
-        theta, carry, dcarry = _start(x, scale, small, held, h)
-        for c in chunks:
-            carry, dcarry = _chunk_jvp(theta, carry, dcarry, c, ex.mean)
-        return _finish(x, scale, small, held, h, carry, dcarry, n_frames)
+        return ch.run(_start, _finish, x, scale, h)
 
     return pass_fn
+
+
+def exact_chunk_grads(nll, args):
+    """``(xs, scale) -> (values (P,), gradients (P, n))`` of ``nll(scale exp(x))`` at the
+    points ``xs`` (P, n) in frame chunks (the same programs for every record length), or None
+    where the chunked pass does not apply (as :func:`exact_chunk_pass`)."""
+    ch = _frame_chunks_of(nll, args)
+    if ch is None:
+        return None
+
+    def grads(xs, scale):
+        return ch.run(_start_at_jit, _finish_at_jit, xs, scale)
+
+    return grads

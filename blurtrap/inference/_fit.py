@@ -37,7 +37,7 @@ from ._chunked import (
     host_newton_minimise,
     ordinate_chunks,
 )
-from ._exact_chunks import exact_chunk_pass
+from ._exact_chunks import exact_chunk_grads, exact_chunk_pass
 from ._newton import MAX_LOG_STEP as MAX_LOG_STEP
 from ._newton import (
     FdObjective,
@@ -180,11 +180,13 @@ def _plan(nll, args):
     return obj.value_grad_hess, obj.coarse_args(args)
 
 
-def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0):
+def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0,
+                    jump_atol=0.0):
     """Safeguarded Newton from ``x0`` (:class:`blurtrap.inference._newton.SafeguardedNewton`
     through ``optx.minimise``). Returns ``(x, value, grad, hess, dx, n_steps, done,
     value_at_x0)`` at the last accepted point ``x``; the estimate is ``x - dx``."""
-    return newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol)
+    return newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol,
+                          jump_atol)
 
 
 class _NewtonFit(eqx.Module):
@@ -357,13 +359,13 @@ def fit_ml_fd_newton(
     (:func:`blurtrap.inference._newton.fd_hessian_pass`). The Hessian error is O(h^2) ~ 1e-8
     relative, far below statistical error. The iteration is the safeguarded Newton of
     :func:`fit_ml`, at most ``max_iter`` steps, with its loop on the host
-    (``_chunked.HOST_NEWTON``; one compiled loop otherwise). The exact likelihood's pass
-    runs in fixed-size frame chunks (:mod:`._exact_chunks`: a new record length compiles
-    nothing); other objectives' pass is compiled per padded length. The covariance is the
-    inverse of that observed Fisher information in natural parameters. Falls back to
-    optimistix BFGS if Newton does not converge. With a parameter at its bound the others'
+    (``_chunked.HOST_NEWTON``; one compiled loop otherwise). The exact and irregular-time
+    likelihoods' pass runs in fixed-size frame chunks (:mod:`._exact_chunks`: a new record
+    length compiles nothing); other objectives' pass is compiled per padded length. The
+    covariance is the inverse of that observed Fisher information in natural parameters.
+    Falls back to optimistix BFGS if Newton does not converge. With a parameter at its bound the others'
     errors are the unconstrained ones (:func:`._bound_errors.release_bound`, its Hessian by
-    differences of the autodiff gradient).
+    differences of the autodiff gradient, in the same frame chunks where they apply).
     """
     if _chunked.HOST_NEWTON:  # loop on the host: only the pass depends on the length
         x0 = jnp.zeros_like(scale)
@@ -378,4 +380,5 @@ def fit_ml_fd_newton(
         out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
     if not bool(out.converged):
         out = _bfgs_jit(nll, scale, args, tol, tol, max_steps)
-    return release_bound(nll, scale, args, out, fd=True)
+    return release_bound(nll, scale, args, out, fd=True,
+                         grads=exact_chunk_grads(nll, args) if _chunked.HOST_NEWTON else None)

@@ -26,18 +26,16 @@ covariance is integrated numerically from the OU kernel.
 
 from __future__ import annotations
 
-import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._constants import BOLTZMANN
+from ._likelihood import gls_loglik
 from ._models import TrapModel
 from ._problems import Layout, RecMeta, bucket_length, rec_meta
 
-_LOG2PI = math.log(2.0 * math.pi)
 #: below this alpha = W/tau the exposure terms use their Taylor series (the direct formulas
 #: cancel to ~1e-16/alpha relative; the series' truncation error is ~alpha^3)
 _ALPHA_SERIES = 1e-3
@@ -83,15 +81,31 @@ def irregular_loglik(y, intervals, exposure, sigma2, tau, eps2, *, mean: str = "
     n = jnp.sum(mask)
     if mean != "zero":
         y = (y - jnp.sum(mask * y) / n) * mask  # shift-invariant; centred for accuracy
+    a, q, c, b, r = _frame_terms(intervals, exposure, tau)
+    series = jnp.stack([y, jnp.ones_like(y)], axis=-1)  # filter y and the mean's regressor
+    init = (jnp.zeros(2, dtype=y.dtype), jnp.asarray(1.0, dtype=y.dtype))
+    _, (e, f) = _filter(series, b, r, mask, a, q, c, eps2 / sigma2, init)
+    return gls_loglik(n, *_innovation_sums(e, f, sigma2, mask), mean)
+
+
+def _frame_terms(intervals, exposure, tau):
+    """``(a, Var u / sigma^2, Cov(u, v) / (sigma^2 b), b_i, 1 - b_i^2)`` of the state-space
+    form (module doc) for frame intervals ``intervals`` and exposure ``exposure``."""
     a, q, c = _exposure_terms(exposure / tau)
-    b = jnp.exp(-intervals / tau)
-    r = -jnp.expm1(-2.0 * intervals / tau)  # 1 - b^2
-    data = jnp.stack([y, jnp.ones_like(y)], axis=-1)  # filter y and the mean's regressor
+    return a, q, c, jnp.exp(-intervals / tau), -jnp.expm1(-2.0 * intervals / tau)
+
+
+def _filter(series, b, r, mask, a, q, c, noise, init):
+    """The Kalman filter over frames: ``series`` (N, 2) the frames and a column of ones (the
+    filter is linear in the data, so one recursion serves both), ``noise = eps^2 / sigma^2``,
+    ``init = (state mean (2,), state variance / sigma^2)`` before the first frame. Frames with
+    ``mask`` 0 (padding) leave the state as it is. Returns the final state and, per frame,
+    the innovations (N, 2) and their variances / sigma^2 (N,)."""
 
     def step(carry, xs):
         m, p = carry  # state mean (2,) and variance (scaled by sigma2)
         yi, bi, ri, wi = xs
-        f = a * a * p + q + eps2 / sigma2
+        f = a * a * p + q + noise
         e = yi - a * m
         g = bi * a * p + bi * c
         m_next = bi * m + (g / f) * e
@@ -101,21 +115,58 @@ def irregular_loglik(y, intervals, exposure, sigma2, tau, eps2, *, mean: str = "
         p_next = jnp.where(wi > 0, p_next, p)
         return (m_next, p_next), (e, f)
 
-    init = (jnp.zeros(2, dtype=y.dtype), jnp.asarray(1.0, dtype=y.dtype))
-    _, (e, f) = jax.lax.scan(step, init, (data, b, r, mask))
+    return jax.lax.scan(step, init, (series, b, r, mask))
+
+
+def _innovation_sums(e, f, sigma2, mask):
+    """``(sum log v, sum e_y^2/v, sum e_1 e_y/v, sum e_1^2/v)`` over the real frames, ``v = f
+    sigma^2`` (the sums :func:`._likelihood.gls_loglik` takes)."""
     v = f * sigma2
     ey, e1 = e[:, 0], e[:, 1]
     wv = mask / v
-    logdet = jnp.sum(mask * jnp.log(v))
-    if mean == "zero":
-        return -0.5 * (n * _LOG2PI + logdet + jnp.sum(ey * ey * wv))
-    s11 = jnp.sum(e1 * e1 * wv)
-    s1y = jnp.sum(e1 * ey * wv)
-    quad = jnp.sum(ey * ey * wv) - s1y * s1y / s11
-    ll = -0.5 * (n * _LOG2PI + logdet + quad)
-    if mean == "reml":
-        ll = ll - 0.5 * jnp.log(s11) + 0.5 * _LOG2PI
-    return ll
+    return (jnp.sum(mask * jnp.log(v)), jnp.sum(ey * ey * wv), jnp.sum(e1 * ey * wv),
+            jnp.sum(e1 * e1 * wv))
+
+
+#: the carry of :func:`chunk_step`: state mean (2), state variance / sigma^2, then the four
+#: sums of :func:`_innovation_sums`
+N_CARRY = 7
+
+
+def chunk_step(theta, carry, y, m, d, w, mean):
+    """The carry (:data:`N_CARRY`) after one chunk of frames ``y`` (mask ``m``, intervals
+    ``d``) of one recording with exposure ``w`` and ``theta = (sigma^2, tau, eps^2)``: the
+    recursion of :func:`irregular_loglik` continued from the carried state (the frame chunks
+    of :mod:`._exact_chunks`). ``mean`` is unused: the four sums serve every mean treatment."""
+    del mean
+    sigma2, tau, e2 = theta[0], theta[1], theta[2]
+    a, q, c, b, r = _frame_terms(d, w, tau)
+    series = jnp.stack([y, jnp.ones_like(y)], axis=-1)
+    (m_end, p_end), (e, f) = _filter(series, b, r, m, a, q, c, e2 / sigma2,
+                                     (carry[:2], carry[2]))
+    sums = jnp.stack(_innovation_sums(e, f, sigma2, m))
+    return jnp.concatenate([m_end, p_end[None], carry[3:] + sums])
+
+
+def initial_carry(dtype):
+    """The carry before the first frame: state mean 0, state variance sigma^2 (1 scaled)."""
+    return jnp.zeros(N_CARRY, dtype).at[2].set(1.0)
+
+
+def frame_params(p, layout: Layout, model: TrapModel, meta: RecMeta):
+    """``(sigma^2, tau, W, eps^2)`` per recording at parameters ``p`` (``W`` 0 without blur,
+    ``eps^2`` 0 without tracking noise)."""
+    k_rec, gamma, eps2 = layout.unpack(p)
+    sigma2 = BOLTZMANN * meta.temp / k_rec
+    tau = gamma / k_rec * jnp.ones_like(sigma2)
+    w = exposures(model, meta) * jnp.ones_like(sigma2)
+    e2 = (eps2 if model.noise else 0.0) * jnp.ones_like(sigma2)
+    return sigma2, tau, w, e2
+
+
+def exposures(model: TrapModel, meta: RecMeta):
+    """The exposure W per recording [s] the filter uses: 0 for a model without blur."""
+    return model._w(meta.w)  # noqa: SLF001
 
 
 class IrregularArgs(eqx.Module):
@@ -184,12 +235,7 @@ def make_irregular_args(recordings, layout, model, mean="reml") -> IrregularArgs
 
 def irregular_nll(p, a: IrregularArgs):
     """Exact negative log-likelihood at irregular frame times, summed over recordings."""
-    k_rec, gamma, eps2 = a.layout.unpack(p)
-    model = a.model
-    sigma2 = BOLTZMANN * a.meta.temp / k_rec
-    tau = gamma / k_rec * jnp.ones_like(sigma2)
-    w = model._w(a.meta.w) * jnp.ones_like(sigma2)  # noqa: SLF001  (0 without blur)
-    e2 = (eps2 if model.noise else 0.0) * jnp.ones_like(sigma2)
+    sigma2, tau, w, e2 = frame_params(p, a.layout, a.model, a.meta)
 
     def one(y, d, m, s2, t, ww, ee):
         return irregular_loglik(y, d, ww, s2, t, ee, mean=a.mean, mask=m)

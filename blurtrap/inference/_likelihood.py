@@ -137,16 +137,27 @@ def arma_loglik(y, c0, c1, rho, *, mean: str = "reml", mask=None):
         y = (y - jnp.sum(mask * y) / n) * mask
     if mean == "zero":
         eps, v = _whiten(y, c0, c1, rho)
-        return -0.5 * (n * _LOG2PI + jnp.sum(mask * jnp.log(v)) + jnp.sum(mask * eps * eps / v))
+        return gls_loglik(n, jnp.sum(mask * jnp.log(v)), jnp.sum(mask * eps * eps / v), 0.0,
+                          1.0, mean)
     both = jnp.stack([y, mask])
     eps, v = _whiten(both, c0, c1, rho)
     ey, e1 = eps[0], eps[1]
     wv = mask / v
-    s11 = jnp.sum(e1 * e1 * wv)
-    s1y = jnp.sum(e1 * ey * wv)
-    syy = jnp.sum(ey * ey * wv)
-    quad = syy - s1y * s1y / s11
-    ll = -0.5 * (n * _LOG2PI + jnp.sum(mask * jnp.log(v)) + quad)
+    return gls_loglik(n, jnp.sum(mask * jnp.log(v)), jnp.sum(ey * ey * wv),
+                      jnp.sum(e1 * ey * wv), jnp.sum(e1 * e1 * wv), mean)
+
+
+def gls_loglik(n, slogv, syy, s1y, s11, mean: str):
+    """The Gaussian log-likelihood of ``n`` frames from the sums over their innovations
+    ``e_t`` (variances ``v_t``) of the frames and ``f_t`` of a column of ones: ``sum log v``,
+    ``y'S^-1 y = sum e^2/v``, ``1'S^-1 y = sum f e/v`` and ``1'S^-1 1 = sum f^2/v``. With
+    ``mean="zero"`` only the first two are used; ``"profile"`` subtracts the GLS mean's part of
+    the quadratic form; ``"reml"`` adds the restricted-likelihood correction. One home for
+    every innovations likelihood (:func:`arma_loglik`, the frame chunks of
+    :mod:`._exact_chunks`, the irregular-time filter of :mod:`._irregular`)."""
+    if mean == "zero":
+        return -0.5 * (n * _LOG2PI + slogv + syy)
+    ll = -0.5 * (n * _LOG2PI + slogv + (syy - s1y * s1y / s11))
     if mean == "reml":
         ll = ll - 0.5 * jnp.log(s11) + 0.5 * _LOG2PI
     return ll

@@ -226,3 +226,30 @@ def test_cov_from_hessian_rules():
     assert pds.tolist() == [True, False, False]
     np.testing.assert_allclose(covs[0, :2, :2], inv[:2, :2], rtol=1e-12)
     assert np.isnan(covs[1]).all() and np.isnan(covs[2]).all()
+
+
+def test_a_tiny_start_value_does_not_make_the_difference_step_rounding_noise():
+    """``unconstrained_cov(fd=True)`` for a parameter at its bound whose start value is ~1e-28
+    of its natural scale (eps^2 started from a Whittle fit that was itself at 0): the first
+    difference step is then rounding noise, so its unit is widened until the curvature stands
+    above rounding, and the covariance equals the inverse of the exact Hessian (analytic
+    objective: a correlated quadratic, bound parameter at 1e-30). Without the widening the
+    full information came out not positive definite and the errors stayed conditional (too
+    small), measured on an irregular-time fit."""
+    import jax.numpy as jnp
+
+    a = np.array([[4.0, 1.0, 1.5], [1.0, 3.0, 1.2], [1.5, 1.2, 2.0]])
+    m = np.array([1.0, 2.0, -0.5])  # the third parameter's optimum is below its bound 0
+
+    def nll(p, args):
+        d = p - jnp.asarray(m)
+        return 0.5 * d @ jnp.asarray(a) @ d
+
+    value = np.array([1.2, 1.9, 1e-30])
+    at_bound = np.array([False, False, True])
+    scale = np.array([1.0, 1.0, 1e-28])
+    cov, pd = _fit.unconstrained_cov(nll, value, None, scale, at_bound, fd=True)
+    want = np.linalg.inv(a)
+    assert pd
+    np.testing.assert_allclose(cov[:2, :2], want[:2, :2], rtol=1e-6)
+    assert np.isnan(cov[2, 2])

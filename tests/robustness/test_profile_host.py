@@ -5,6 +5,7 @@
 The compiled program is the reference here; it is checked against independent profiles and
 by coverage in tests/inference/test_boundary.py and benchmarks/RESULTS_boundary.md."""
 
+import _irregular_gen as gen
 import jax
 import numpy as np
 import pytest
@@ -31,11 +32,22 @@ def rec(y, w=0.1):
     return bt.Recording(y, frame_interval=DT, exposure=w * DT)
 
 
+def jittered(n, seed):
+    """Frames at irregular times (a wandering clock, intervals dt (1 + 0.05 N(0, 1))) from the
+    dense OU covariance (tests/_irregular_gen.py), W = 0.1 dt, no tracking error."""
+    rng = np.random.default_rng(seed)
+    s = gen.clock("wander", n, DT, 0.05, rng)
+    y = gen.frames(s, 0.1 * DT, 2e-5, GAMMA, 295.0, 0.0, rng)
+    return bt.Recording(y, frame_interval=float(np.median(np.diff(s))), times=s,
+                        exposure=0.1 * DT, allow_irregular=True)
+
+
 CASES = {
     "whittle": (lambda: rec(frames(20_000, 3)), {}),
     "exact": (lambda: rec(frames(3000, 4)), {"likelihood": "exact"}),
     "exact, gamma held": (lambda: rec(frames(4000, 5, 1.0, 2e-9), 1.0),
                           {"likelihood": "exact", "fixed": {"gamma": GAMMA}}),
+    "irregular": (lambda: jittered(1500, 7), {"likelihood": "exact"}),
 }
 
 
