@@ -79,7 +79,8 @@ class IrregularChunk(eqx.Module):
         return self.y, self.m, self.d, self.w
 
     def step(self, theta, carry, rec, mean):
-        return _irregular.chunk_step(theta, carry, *rec, mean)
+        y, m, d, w = rec
+        return _irregular.chunk_step(theta, carry, y, m, d, w, mean)
 
 
 def frame_chunks(a: ExactArgs, size: int) -> list[FrameChunk]:
