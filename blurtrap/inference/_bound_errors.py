@@ -152,8 +152,10 @@ def unconstrained_cov(nll, value, args, scale, at_bound, fd=False, parts=None, g
     h, g = hess(s)
     if fd:
         for _ in range(_FD_WIDEN_PASSES):  # a bound parameter's step above rounding first
+            # |curvature| above the signal level is real of either sign: a negative one
+            # cannot be widened away (it scales with s^2), so the loop stops there too
             d = np.diagonal(h)
-            narrow = at_bound & ~(d > _FD_SIGNAL * np.abs(g))
+            narrow = at_bound & ~(np.abs(d) > _FD_SIGNAL * np.abs(g))
             if not narrow.any():
                 break
             s = np.where(narrow, s * _FD_WIDEN, s)

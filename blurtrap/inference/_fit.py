@@ -181,7 +181,7 @@ def _plan(nll, args):
 
 
 def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0,
-                    jump_atol=0.0):
+                    jump_atol=None):
     """Safeguarded Newton from ``x0`` (:class:`blurtrap.inference._newton.SafeguardedNewton`
     through ``optx.minimise``). Returns ``(x, value, grad, hess, dx, n_steps, done,
     value_at_x0)`` at the last accepted point ``x``; the estimate is ``x - dx``."""
@@ -380,5 +380,7 @@ def fit_ml_fd_newton(
         out = _fd_newton_jit(nll, scale, args, h, tol, max_iter)
     if not bool(out.converged):
         out = _bfgs_jit(nll, scale, args, tol, tol, max_steps)
-    return release_bound(nll, scale, args, out, fd=True,
-                         grads=exact_chunk_grads(nll, args) if _chunked.HOST_NEWTON else None)
+    grads = None  # built only when needed: it cuts the frames into chunks again
+    if _chunked.HOST_NEWTON and out.at_bound is not None and bool(jnp.any(out.at_bound)):
+        grads = exact_chunk_grads(nll, args)
+    return release_bound(nll, scale, args, out, fd=True, grads=grads)

@@ -8,7 +8,7 @@ import pytest
 import scipy.optimize
 import scipy.stats
 
-from blurtrap.inference import _fit
+from blurtrap.inference import _chunked, _fit
 from blurtrap.inference._newton import (
     AbstractObjective,
     FunctionObjective,
@@ -172,3 +172,48 @@ def test_a_parameter_running_to_its_bound_is_sent_there_at_once(jump):
     best = float(_bound_objective(jnp.asarray([u0, 0.0]), None))
     assert float(st.value) - best < 1e-8
     assert (int(st.n_steps) <= 4) if jump else (int(st.n_steps) > 12), int(st.n_steps)
+
+
+@pytest.mark.parametrize("barrier", ["log", "inverse"])
+def test_a_wrong_bound_jump_is_undone(barrier):
+    """``-b log u + c u`` or ``b/u + c u`` (a stiffness-like parameter, optimum near 1)
+    started far above its optimum looks locally like a parameter running to its bound
+    (log-space curvature ~ gradient). Allowed to jump there, the fit still ends at the
+    interior optimum (as without jumps, to 1e-8): a jump that raises the objective (``1/u``)
+    gives way to the plain Newton step at once (the next point evaluated is that step, not
+    the jump shortened); one that lowers it (``log``) is walked back. Profile fits allow
+    jumps only for parameters at or near their bound (``_profile.jump_atols``): this is the
+    safety net, not the rule."""
+    def f(p, args):
+        head = -3.0 * jnp.log(p[0]) if barrier == "log" else 3.0 / p[0]
+        return head + 3.0 * p[0] + 0.5 * (p[1] - 2.0) ** 2 + 0.1 * p[0] * p[1]
+
+    fn = _fit._autodiff_pass(FunctionObjective(f))
+    scale = jnp.ones(2)
+    x0 = jnp.log(jnp.asarray([100.0 if barrier == "log" else 10.0, 2.0]))
+    ref = newton_minimise(fn, scale, None, x0, 1e-10, 1e-10, 60)
+    seen = []
+
+    def pass_fn(x):
+        seen.append(float(np.exp(x[0])))
+        return fn(x, scale, None)
+
+    st, _ = _chunked.host_newton_loop(pass_fn, x0, 1e-10, 1e-10, 60, 1e-7,
+                                      jump_atol=jnp.asarray([1e-9, 0.0]))
+    assert bool(ref.state.done) and bool(st.done)
+    np.testing.assert_allclose(np.asarray(st.x - st.step), np.asarray(ref.value), atol=1e-8)
+    assert seen[1] < 1e-8  # the jump was tried
+    if barrier == "inverse":
+        assert seen[2] > 1.0, seen[:4]  # then the plain Newton step, not the jump shortened
+
+
+def test_profile_jumps_only_for_parameters_at_or_near_their_bound():
+    """``jump_atols``: > 0 for a parameter at its bound or whose Wald interval reaches 0,
+    0 for the others (a stiffness far above its optimum must never be sent to 0)."""
+    from blurtrap.inference._profile import _JUMP_ATOL, jump_atols
+
+    at_bound = np.array([False, False, True, False])
+    theta = np.array([2e-5, 3e-8, 1e-30, 1e-18])
+    se = np.array([1e-6, 2e-9, np.nan, 2e-18])
+    np.testing.assert_array_equal(jump_atols(at_bound, theta, se),
+                                  [0.0, 0.0, _JUMP_ATOL, _JUMP_ATOL])

@@ -130,17 +130,18 @@ def test_held_parameters_use_the_chunked_pass():
 
 @pytest.mark.parametrize("bound", [False, True], ids=["interior", "eps^2 at its bound"])
 def test_chunked_fit_equals_the_compiled_pass(monkeypatch, bound):
-    """``calibrate`` of two irregular recordings with the chunked pass gives the estimates
-    (1e-10), errors (1e-8) and log-likelihood of the compiled whole-record pass; with eps^2
-    at its bound the others' errors come from the natural-parameter Hessian, by gradients in
-    the same chunks (compiled on the whole record with the chunks off)."""
+    """``calibrate`` of two irregular recordings with the chunked pass (chunks of 512 frames)
+    gives the estimates (1e-10), errors (1e-8) and log-likelihood of the compiled
+    whole-record pass; with eps^2 at its bound the others' errors come from the
+    natural-parameter Hessian, by gradients in the same chunks (compiled on the whole record
+    with the chunks off)."""
     kw, seed = ({"eps": 0.0, "w": 0.1 * DT}, 84) if bound else ({}, 80)
     data = bt.RecordingSet([rec(n, seed + i, **kw) for i, n in enumerate((1100, 2600))])
     out = {}
-    for chunk in (_exact_chunks.FRAME_CHUNK, None):
+    for chunk in (512, None):  # 512: both recordings span several chunks
         monkeypatch.setattr(_exact_chunks, "FRAME_CHUNK", chunk)
         out[chunk] = bt.calibrate(data, likelihood="exact", k="per_recording")
-    a, b = out[None], out[_exact_chunks.FRAME_CHUNK or 4096]
+    a, b = out[None], out[512]
     assert a.converged and b.converged and a.param_names == b.param_names
     assert a.at_bounds == b.at_bounds == (("tracking_var",) if bound else ())
     # eps^2 at its bound: ~1e-30 m^2 either way (0 to rounding)
