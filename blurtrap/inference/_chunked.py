@@ -210,13 +210,11 @@ def _update(solver, y, state, t, v, g, h):
     return new.x, new, solver.trial(new.x, new), go, stop, result
 
 
-def _solver(rtol, atol, flat_atol=0.0, value_atol=0.0, jump_atol=None):
+def _solver(rtol, atol, flat_atol=0.0, value_atol=0.0):
     # tolerances as arrays: one compiled update for the coarse and the full fit alike
     return SafeguardedNewton(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float),
                              flat_atol=jnp.asarray(flat_atol, float),
-                             value_atol=jnp.asarray(value_atol, float),
-                             jump_atol=None if jump_atol is None else jnp.asarray(jump_atol,
-                                                                                 float))
+                             value_atol=jnp.asarray(value_atol, float))
 
 
 def host_newton_minimise(nll, scale, chunks, x0, rtol, atol, max_steps, value_atol=0.0):
@@ -235,12 +233,11 @@ def host_newton_minimise(nll, scale, chunks, x0, rtol, atol, max_steps, value_at
     return host_newton_loop(pass_fn, x0, rtol, atol, max_steps, value_atol=value_atol)
 
 
-def host_newton_loop(pass_fn, x0, rtol, atol, max_steps, flat_atol=0.0, value_atol=0.0,
-                     jump_atol=None):
+def host_newton_loop(pass_fn, x0, rtol, atol, max_steps, flat_atol=0.0, value_atol=0.0):
     """The safeguarded Newton iteration of :func:`._newton.newton_minimise` with the loop on
     the host and the pass ``pass_fn(x) -> (value, grad, hess)`` (any host function, e.g. a
     sum over chunks): at most ``max_steps`` Newton steps. Returns ``(state, result)``."""
-    solver = _solver(rtol, atol, flat_atol, value_atol, jump_atol)
+    solver = _solver(rtol, atol, flat_atol, value_atol)
     state, _ = _start(solver, x0)
     y = t = x0
     stop = False

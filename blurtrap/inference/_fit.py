@@ -180,13 +180,11 @@ def _plan(nll, args):
     return obj.value_grad_hess, obj.coarse_args(args)
 
 
-def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0,
-                    jump_atol=None):
+def _newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0):
     """Safeguarded Newton from ``x0`` (:class:`blurtrap.inference._newton.SafeguardedNewton`
     through ``optx.minimise``). Returns ``(x, value, grad, hess, dx, n_steps, done,
     value_at_x0)`` at the last accepted point ``x``; the estimate is ``x - dx``."""
-    return newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol,
-                          jump_atol)
+    return newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol)
 
 
 class _NewtonFit(eqx.Module):

@@ -40,9 +40,6 @@ _BACKTRACK = 0.25
 _MIN_STEP = 1e-12
 #: smallest positive curvature (relative to the largest) the Newton step divides by
 _CURV_MIN = 1e-30
-#: a coordinate counts as running to its bound (see :func:`bound_jump`) when its log-space
-#: curvature is within this fraction of its gradient
-_JUMP_RTOL = 0.5
 
 
 # ------------------------------------------------------------------------------------------
@@ -161,36 +158,6 @@ def newton_direction(g, h):
     return q @ ((q.T @ g) / w_mod), pd, psd
 
 
-def bound_jump(g, h, jump_atol):
-    """The Newton step with the coordinates that run to their lower bound sent there at once:
-    ``(dx, run)``.
-
-    In log parameters a parameter whose optimum is at its bound 0 (eps^2 -> 0) behaves like
-    ``f ~ f0 + c u = f0 + c e^x`` (linear in natural units): gradient and curvature are both
-    ~``c u``, so Newton moves it one log unit per step and the decrease still to come, ``c u``,
-    falls only by e per pass (~20 passes from 1 nat to 1e-7). Such a coordinate (``g_j > 0``,
-    ``|H_jj - g_j| < _JUMP_RTOL g_j``: the natural-units model has its minimum at or below 0,
-    and ``g_j > 10 jump_atol``) is moved down by ``log(g_j / jump_atol)``, to where its
-    decrease still to come is ~``jump_atol``; the others take the Newton step of their own
-    block with the gradient that move leaves them, ``g_F - H_Fj (1 - e^-dx_j)`` (the coupling
-    is linear in ``u_j``). ``jump_atol`` may be per coordinate: 0 where no jump is allowed.
-    The local test cannot tell "linear down to 0" from "linear, then a barrier far below"
-    (a stiffness far above its optimum looks the same), so callers allow it only for
-    parameters whose estimate is at or near their bound. Where the jumped step is not a
-    descent direction (an indefinite Hessian's coupling) ``run`` is all False. With ``run``
-    all False ``dx`` is the modified Newton step of :func:`newton_direction`."""
-    d = jnp.diagonal(h)
-    run = (jump_atol > 0) & (g > 10.0 * jump_atol) & (jnp.abs(d - g) < _JUMP_RTOL * g)
-    jump = jnp.log(jnp.maximum(g, 1e-300) / jnp.maximum(jump_atol, 1e-300))
-    keep = ~run[:, None] & ~run[None, :]
-    h_free = jnp.where(keep, h, jnp.eye(g.shape[0], dtype=h.dtype))
-    moved = jnp.where(run, -jnp.expm1(-jump), 0.0)
-    dx_free, _, _ = newton_direction(jnp.where(run, 0.0, g - h @ moved), h_free)
-    dx = jnp.where(run, jump, dx_free)
-    run = run & (jnp.dot(g, dx) > 0)
-    return dx, run
-
-
 class NewtonState(eqx.Module):
     """State at the last accepted point ``x`` (the solver's ``y``)."""
 
@@ -204,7 +171,6 @@ class NewtonState(eqx.Module):
     done: Bool[Array, ""]
     value_start: Float[Array, ""]  # objective at y0
     size_prev: Float[Array, ""]  # max |step| at the previous accepted point
-    plain: Array  # the modified Newton step at x (``step`` unless a bound jump is in it)
 
 
 class SafeguardedNewton(optx.AbstractMinimiser):
@@ -229,11 +195,7 @@ class SafeguardedNewton(optx.AbstractMinimiser):
       ``_FTOL (1 + |v|) + flat_atol`` counts as converged. With ``value_atol`` > 0 (a fit
       whose value is all that is used: diagnose's screening fits), a Newton decrement
       ``g.dx`` (twice the decrease still to come) below it with a positive semi-definite
-      Hessian also counts. With ``jump_atol`` (the held fits of profile intervals: per
-      coordinate, > 0 for parameters at or near their bound) such a parameter running to
-      its bound is sent there in one step (:func:`bound_jump`; the step-length cap and the
-      convergence history apply to the others); if that trial is rejected the plain Newton
-      step is tried next.
+      Hessian also counts.
 
     Each step makes exactly one pass (one call of ``fn``). ``optx.minimise``'s ``max_steps``
     counts passes: ``max_steps = n + 1`` allows ``n`` Newton steps. The final state holds the
@@ -244,7 +206,6 @@ class SafeguardedNewton(optx.AbstractMinimiser):
     norm: Callable = eqx.field(static=True, default=optx.max_norm)
     flat_atol: float | Array = 0.0
     value_atol: float | Array = 0.0
-    jump_atol: float | Array | None = None
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> NewtonState:
         n = y.shape[0]
@@ -252,7 +213,7 @@ class SafeguardedNewton(optx.AbstractMinimiser):
         return NewtonState(x=y, value=z, grad=jnp.zeros(n, y.dtype),
                            hess=jnp.eye(n, dtype=y.dtype), step=jnp.zeros(n, y.dtype),
                            lam=jnp.ones((), y.dtype), n_steps=jnp.asarray(-1), done=jnp.asarray(False),
-                           value_start=z, size_prev=z, plain=jnp.zeros(n, y.dtype))
+                           value_start=z, size_prev=z)
 
     def _converged(self, t, vt, gt, dxt, pd, psd, size_prev):
         a = jnp.max(jnp.abs(dxt))
@@ -281,28 +242,15 @@ class SafeguardedNewton(optx.AbstractMinimiser):
                                         + _ROUNDING * (1.0 + jnp.abs(state.value)))
         accept = first | (jnp.isfinite(vt) & jnp.all(jnp.isfinite(gt)) & decrease)
         dxt, pd, psd = newton_direction(gt, ht)
-        plain = dxt
-        if self.jump_atol is None:
-            run = jnp.zeros(dxt.shape, bool)
-        else:
-            dx_jump, run = bound_jump(gt, ht, self.jump_atol)
-            dxt = jnp.where(jnp.any(run), dx_jump, dxt)
-        done_t, _ = self._converged(t, vt, gt, dxt, pd, psd, state.size_prev)
-        a = jnp.max(jnp.where(run, 0.0, jnp.abs(dxt)))  # a jump is neither capped nor history
+        done_t, a = self._converged(t, vt, gt, dxt, pd, psd, state.size_prev)
         pick = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
-        # rejected: backtrack, except that a rejected jump gives way to the plain Newton step
-        jumped = jnp.any(state.step != state.plain)
-        a_plain = jnp.max(jnp.abs(state.plain))
         lam = jnp.where(accept, jnp.minimum(1.0, MAX_LOG_STEP / jnp.maximum(a, 1e-300)),
-                        jnp.where(jumped, jnp.minimum(1.0, MAX_LOG_STEP
-                                                      / jnp.maximum(a_plain, 1e-300)),
-                                  _BACKTRACK * state.lam))
+                        _BACKTRACK * state.lam)
         new = NewtonState(x=pick(t, y), value=pick(vt, state.value), grad=pick(gt, state.grad),
-                          hess=pick(ht, state.hess),
-                          step=jnp.where(accept, dxt, state.plain), lam=lam,
+                          hess=pick(ht, state.hess), step=pick(dxt, state.step), lam=lam,
                           n_steps=state.n_steps + 1, done=accept & done_t,
                           value_start=jnp.where(first, vt, state.value_start),
-                          size_prev=pick(a, state.size_prev), plain=pick(plain, state.plain))
+                          size_prev=pick(a, state.size_prev))
         return new
 
     def terminate(self, fn, y, args, options, state: NewtonState, tags):
@@ -328,22 +276,19 @@ class _PassFunction(eqx.Module):
         return v, (g, h)
 
 
-def newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0,
-                    jump_atol=None):
+def newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0):
     """Minimise with :class:`SafeguardedNewton` from ``x0`` through ``optx.minimise``
     (``throw=False``): at most ``max_steps`` Newton steps. ``pass_fn(x, scale, args)``
     returns value, gradient and Hessian in ``x``. Returns the ``optx.Solution``: ``value`` is
     the estimate (the final Newton step applied when converged), ``state`` a
     :class:`NewtonState`."""
-    solver = SafeguardedNewton(rtol=rtol, atol=atol, flat_atol=flat_atol, jump_atol=jump_atol)
+    solver = SafeguardedNewton(rtol=rtol, atol=atol, flat_atol=flat_atol)
     return optx.minimise(_PassFunction(pass_fn), solver, x0, args=(scale, args), has_aux=True,
                          max_steps=max_steps + 1, throw=False)
 
 
-def newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0,
-                   jump_atol=None):
+def newton_iterate(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol=0.0):
     """:func:`newton_minimise` as a tuple ``(x, value, grad, hess, dx, n_steps, done,
     value_at_x0)`` at the last accepted point ``x`` (the estimate is ``x - dx``)."""
-    st = newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol,
-                         jump_atol).state
+    st = newton_minimise(pass_fn, scale, args, x0, rtol, atol, max_steps, flat_atol).state
     return st.x, st.value, st.grad, st.hess, st.step, st.n_steps, st.done, st.value_start

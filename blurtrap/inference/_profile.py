@@ -58,22 +58,6 @@ _FD_STEP = 1e-4
 #: a profile fit whose remaining decrease along a direction running into a bound is below
 #: ~1e-7 nats (far below the 4e-4 root tolerance) is converged
 _FLAT_ATOL = 1e-7
-#: a free parameter at or near its bound (estimate at the bound, or Wald interval reaching 0)
-#: running to its bound in a profile fit is sent in one step to where its remaining decrease
-#: is ~1e-9 nats (``SafeguardedNewton.jump_atol``), instead of one log unit per pass. Also in
-#: the restart from a lifted start: there a jump could pass over an interior minimum that
-#: walking would find (shown on an analytic objective with a linear tail above a dip); on
-#: 24 recordings of 2000 frames (exact and irregular-time, half with eps^2 at its bound) the
-#: 72 end points equalled those without jumps to 5e-10 of the interval width, in 0.54x the
-#: time (benchmarks/_jump_check.py); without jumps in the restart there was no gain at all
-_JUMP_ATOL = 1e-9
-
-
-def jump_atols(at_bound, theta_hat, se):
-    """``SafeguardedNewton.jump_atol`` per parameter: :data:`_JUMP_ATOL` for those at or
-    near their bound (at it, or the Wald interval reaching 0), else 0 (numpy or JAX)."""
-    near = at_bound | ~(theta_hat - Z95 * se > 0)
-    return near * _JUMP_ATOL
 
 
 def fd_pass(nll, h=_FD_STEP):
@@ -103,7 +87,7 @@ def _held(pass_fn):
     return f
 
 
-def _fit_held(held, scale, args, mask, t, x0, x_lift, jump, tol=1e-9):
+def _fit_held(held, scale, args, mask, t, x0, x_lift, tol=1e-9):
     """Minimum over the free parameters with ``x[mask] = t``: (value, x at the minimum, ok).
 
     In log parameters a parameter driven to its bound (u -> 0) cannot come back by itself
@@ -113,13 +97,12 @@ def _fit_held(held, scale, args, mask, t, x0, x_lift, jump, tol=1e-9):
     0.71). So a fit that ends with a free parameter at its bound
     (:func:`blurtrap.inference._fit.at_lower_bound`) is restarted with that parameter at
     ``x_lift`` (its estimate, or for one at its bound at the estimate the distance at which
-    its profile rises by 1.92), and the lower of the two minima kept. ``jump``: the
-    parameters' :func:`jump_atols`."""
+    its profile rises by 1.92), and the lower of the two minima kept."""
 
-    def run(x_start, jmp):
+    def run(x_start):
         x, v, g, h, dx, _, done, _ = _newton_iterate(held, scale, (args, mask, t), x_start,
                                                      tol, tol, _NEWTON_STEPS,
-                                                     flat_atol=_FLAT_ATOL, jump_atol=jmp)
+                                                     flat_atol=_FLAT_ATOL)
         trapped = at_lower_bound(g, h) & ~mask
         return v - 0.5 * jnp.dot(g, dx), jnp.where(mask, t, x - dx), done, trapped
 
@@ -127,7 +110,7 @@ def _fit_held(held, scale, args, mask, t, x0, x_lift, jump, tol=1e-9):
     # parameter ended at its bound, once more from the lifted start, keeping the lower one
     def body(st):
         v1, x1, d1, start, first, _ = st
-        v2, x2, d2, tr = run(start, jump)
+        v2, x2, d2, tr = run(start)
         take = first | (d2 & (v2 < v1))
         return (jnp.where(take, v2, v1), jnp.where(take, x2, x1),
                 jnp.where(first, d2, d1 | d2), jnp.where(tr, x_lift, x2),
@@ -139,7 +122,7 @@ def _fit_held(held, scale, args, mask, t, x0, x_lift, jump, tol=1e-9):
     return v, x, done
 
 
-def _end_point(held, scale, args, x_hat, at_bound, i_mask, side, d1, slope, x_lift, jump):
+def _end_point(held, scale, args, x_hat, at_bound, i_mask, side, d1, slope, x_lift):
     """Distance ``d >= 0`` from the estimate ``theta_i`` (natural units) to the interval end
     on ``side`` (+1 / -1): the root of ``sqrt(2 (nll_p - v_min)) - 1.96``, or the bound 0
     (lower side) when the profile there is still within 1.92 of the minimum. ``slope``:
@@ -163,7 +146,7 @@ def _end_point(held, scale, args, x_hat, at_bound, i_mask, side, d1, slope, x_li
         moved = jnp.where(p0 > 0.5 * scale * jnp.exp(x), jnp.log(jnp.maximum(p0, 1e-300) / scale),
                           x)
         v, x_new, ok_fit = _fit_held(held, scale, args, i_mask & ~first, t,
-                                     jnp.where(first, x_hat, moved), x_lift, jump)
+                                     jnp.where(first, x_hat, moved), x_lift)
         # first pass: the minimum, the estimate theta_i and the lower side's bound 0
         theta = jnp.where(at_bound, 0.0, scale * jnp.exp(x_new))
         th_new = jnp.sum(jnp.where(i_mask, theta, 0.0))
@@ -227,7 +210,6 @@ def _profile_ends(nll, args, scale, x_hat, cov, at_bound, hessian):
     x_lift = jnp.log(jnp.where(at_bound, d_bound, theta_hat) / scale)
     se = jnp.sqrt(jnp.abs(jnp.diagonal(cov)))
     d1 = jnp.where(at_bound | ~jnp.isfinite(se), d_bound, Z95 * se)
-    jump = jump_atols(at_bound, theta_hat, se)
     masks = jnp.concatenate([jnp.eye(n, dtype=bool), jnp.eye(n, dtype=bool)])
     sides = jnp.concatenate([-jnp.ones(n), jnp.ones(n)]).astype(x_hat.dtype)
     d1s = jnp.concatenate([d1, d1])
@@ -240,8 +222,7 @@ def _profile_ends(nll, args, scale, x_hat, cov, at_bound, hessian):
     slopes = jnp.concatenate([slopes, slopes])
 
     def one(mask, side, d1_, slope):
-        return _end_point(held, scale, args, x_hat, at_bound, mask, side, d1_, slope, x_lift,
-                          jump)
+        return _end_point(held, scale, args, x_hat, at_bound, mask, side, d1_, slope, x_lift)
 
     d, ok, th, v_min = jax.vmap(one)(masks, sides, d1s, slopes)
     low = th[:n] - d[:n]
@@ -270,7 +251,7 @@ def _wald_path_roots(nll, args, value, cov):
 def _consts():
     return {"z95": Z95, "drop": DROP, "log_zero": _LOG_ZERO, "root_tol": _ROOT_TOL,
             "root_steps": _ROOT_STEPS, "newton_steps": _NEWTON_STEPS, "tol": 1e-9,
-            "flat_atol": _FLAT_ATOL, "jump_atols": jump_atols}
+            "flat_atol": _FLAT_ATOL}
 
 
 def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):

@@ -75,8 +75,8 @@ class _HeldFits:
     """Held-parameter Newton fits of one objective (:func:`._profile._fit_held` on the
     host)."""
 
-    def __init__(self, pass_fn, scale, consts, jump):
-        self.pass_fn, self.scale, self.c, self.jump = pass_fn, jnp.asarray(scale), consts, jump
+    def __init__(self, pass_fn, scale, consts):
+        self.pass_fn, self.scale, self.c = pass_fn, jnp.asarray(scale), consts
 
     def _run(self, mask, t, x_start):
         def held(x):
@@ -88,8 +88,7 @@ class _HeldFits:
 
         tol = self.c["tol"]
         st, _ = _chunked.host_newton_loop(held, jnp.asarray(x_start), tol, tol,
-                                          self.c["newton_steps"], self.c["flat_atol"],
-                                          jump_atol=self.jump)
+                                          self.c["newton_steps"], self.c["flat_atol"])
         g, dx = np.asarray(st.grad), np.asarray(st.step)
         trapped = np.asarray(at_lower_bound(st.grad, st.hess)) & ~mask
         return (float(st.value) - 0.5 * float(g @ dx),
@@ -170,7 +169,7 @@ def host_profile_ends(pass_fn, scale, x_hat, cov, at_bound, consts):
         slopes = np.where(var[None, :] > 0, cov / np.where(var > 0, var, 1.0)[None, :], 0.0).T
     slopes = np.where(np.eye(n, dtype=bool) | at_bound[None, :], 0.0, slopes)
 
-    fits = _HeldFits(pass_fn, scale, consts, consts["jump_atols"](at_bound, theta_hat, se))
+    fits = _HeldFits(pass_fn, scale, consts)
     # the unconstrained minimum (each compiled lane's first pass), once for all lanes
     v_min, x_first, ok_first = fits.fit(np.zeros(n, bool), 0.0, x_hat, x_lift)
     theta = np.where(at_bound, 0.0, scale * np.exp(x_first))

@@ -133,19 +133,21 @@ def _singular_fisher_causes(recs, values, names) -> str:
     tau = math.nan
     if "gamma" in names and "k" in names:
         tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
+    out = _outlier_sentence(recs)
     if zr < 5.0:
         causes.append(f"dt >> tau: the lag-1 correlation of the frames is only {zr:.1f} "
                       "standard errors above 0" + (f" (the fit ran tau = gamma/k to {tau:.3g} "
                       f"s; dt = {dt:.3g} s)" if math.isfinite(tau) else "")
                       + ", so there is little temporal information (use recordings at "
                       "several exposures or powers)")
-    elif math.isfinite(tau) and tau < dt / 3.0:
+    elif math.isfinite(tau) and tau < dt / 3.0 and not out:
+        # (with outliers present and the clipped frames resolving the relaxation, the fitted
+        # tau is the outliers' doing: the outlier sentence below names the cause)
         causes.append(f"dt >> tau: the fit puts the relaxation time tau = gamma/k at {tau:.3g} s, "
                       f"shorter than the frame interval {dt:.3g} s, where one recording carries "
                       "too little temporal information for gamma; give the friction "
                       "(friction='stokes' with the bead radius, or fixed={'gamma': ...}) or "
                       "record at several exposures")
-    out = _outlier_sentence(recs)
     if out:
         causes.append(out)
     for i, r in enumerate(recs):

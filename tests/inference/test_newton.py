@@ -8,7 +8,7 @@ import pytest
 import scipy.optimize
 import scipy.stats
 
-from blurtrap.inference import _chunked, _fit
+from blurtrap.inference import _fit
 from blurtrap.inference._newton import (
     AbstractObjective,
     FunctionObjective,
@@ -143,77 +143,3 @@ def test_fd_newton_fit_agrees_with_the_exact_hessian_fit_and_scipy():
     np.testing.assert_allclose(np.asarray(fd.value), [a, 1 / sc], rtol=1e-4)
     np.testing.assert_allclose(np.asarray(fd.value), np.asarray(ad.value), rtol=1e-8)
     np.testing.assert_allclose(np.asarray(fd.cov), np.asarray(ad.cov), rtol=1e-6)
-
-
-def _bound_objective(p, args):
-    """``a/2 (u0 - 1 - rho u1)^2 + c u1 + u0^2/20`` over u = p > 0: u1's minimum is at its
-    bound 0 (c > 0 beats the coupling), where u0 = 1/(1 + 1/(10 a)) exactly."""
-    a, rho, c = 40.0, 0.8, 3.0
-    return 0.5 * a * (p[0] - 1.0 - rho * p[1]) ** 2 + c * p[1] + p[0] ** 2 / 20.0
-
-
-@pytest.mark.parametrize("jump", [1e-9, 0.0])
-def test_a_parameter_running_to_its_bound_is_sent_there_at_once(jump):
-    """With ``jump_atol`` the coordinate whose log-space gradient and curvature agree (linear
-    in natural units, minimum below 0) is moved to where its remaining decrease is ~1e-9 in
-    one step, the other one corrected for the coupling: from u = (1.02, 0.02) converged to the
-    bound optimum in at most 4 passes. Without it the same fit walks one log unit per pass (> 12 passes); both end
-    at the same optimum (u0 to 1e-9, value to 1e-8)."""
-    scale = jnp.asarray([1.0, 1.0])
-    x0 = jnp.log(jnp.asarray([1.02, 0.02]))
-    fn = _fit._autodiff_pass(FunctionObjective(_bound_objective))
-    sol = newton_minimise(fn, scale, None, x0, 1e-9, 1e-9, 60, flat_atol=1e-7, jump_atol=jump)
-    st = sol.state
-    assert bool(st.done)
-    u = np.exp(np.asarray(sol.value))
-    a = 40.0
-    u0 = 1.0 / (1.0 + 1.0 / (10.0 * a))
-    assert abs(u[0] - u0) < 1e-9 and u[1] < 1e-7
-    best = float(_bound_objective(jnp.asarray([u0, 0.0]), None))
-    assert float(st.value) - best < 1e-8
-    assert (int(st.n_steps) <= 4) if jump else (int(st.n_steps) > 12), int(st.n_steps)
-
-
-@pytest.mark.parametrize("barrier", ["log", "inverse"])
-def test_a_wrong_bound_jump_is_undone(barrier):
-    """``-b log u + c u`` or ``b/u + c u`` (a stiffness-like parameter, optimum near 1)
-    started far above its optimum looks locally like a parameter running to its bound
-    (log-space curvature ~ gradient). Allowed to jump there, the fit still ends at the
-    interior optimum (as without jumps, to 1e-8): a jump that raises the objective (``1/u``)
-    gives way to the plain Newton step at once (the next point evaluated is that step, not
-    the jump shortened); one that lowers it (``log``) is walked back. Profile fits allow
-    jumps only for parameters at or near their bound (``_profile.jump_atols``): this is the
-    safety net, not the rule."""
-    def f(p, args):
-        head = -3.0 * jnp.log(p[0]) if barrier == "log" else 3.0 / p[0]
-        return head + 3.0 * p[0] + 0.5 * (p[1] - 2.0) ** 2 + 0.1 * p[0] * p[1]
-
-    fn = _fit._autodiff_pass(FunctionObjective(f))
-    scale = jnp.ones(2)
-    x0 = jnp.log(jnp.asarray([100.0 if barrier == "log" else 10.0, 2.0]))
-    ref = newton_minimise(fn, scale, None, x0, 1e-10, 1e-10, 60)
-    seen = []
-
-    def pass_fn(x):
-        seen.append(float(np.exp(x[0])))
-        return fn(x, scale, None)
-
-    st, _ = _chunked.host_newton_loop(pass_fn, x0, 1e-10, 1e-10, 60, 1e-7,
-                                      jump_atol=jnp.asarray([1e-9, 0.0]))
-    assert bool(ref.state.done) and bool(st.done)
-    np.testing.assert_allclose(np.asarray(st.x - st.step), np.asarray(ref.value), atol=1e-8)
-    assert seen[1] < 1e-8  # the jump was tried
-    if barrier == "inverse":
-        assert seen[2] > 1.0, seen[:4]  # then the plain Newton step, not the jump shortened
-
-
-def test_profile_jumps_only_for_parameters_at_or_near_their_bound():
-    """``jump_atols``: > 0 for a parameter at its bound or whose Wald interval reaches 0,
-    0 for the others (a stiffness far above its optimum must never be sent to 0)."""
-    from blurtrap.inference._profile import _JUMP_ATOL, jump_atols
-
-    at_bound = np.array([False, False, True, False])
-    theta = np.array([2e-5, 3e-8, 1e-30, 1e-18])
-    se = np.array([1e-6, 2e-9, np.nan, 2e-18])
-    np.testing.assert_array_equal(jump_atols(at_bound, theta, se),
-                                  [0.0, 0.0, _JUMP_ATOL, _JUMP_ATOL])
