@@ -144,8 +144,12 @@ def unconstrained_cov(nll, value, args, scale, at_bound, fd=False, parts=None, g
             if np.all(u > 0):
                 g = np.asarray(grads(jnp.asarray(np.log(u)), jnp.asarray(s))[1]) / u
                 return np.asarray(_fd_assemble(jnp.asarray(g), jnp.asarray(at_bound))), g[0]
+        if not fd:  # the gradient only sets the difference step
+            return sum(np.asarray(_natural_hessian_jit(nll, jnp.asarray(value), a,
+                                                       jnp.asarray(s), jnp.asarray(at_bound)))
+                       for a in parts), None
         out = [_natural_hessian_jit(nll, jnp.asarray(value), a, jnp.asarray(s),
-                                    jnp.asarray(at_bound), bool(fd), True) for a in parts]
+                                    jnp.asarray(at_bound), True, True) for a in parts]
         return (sum(np.asarray(o[0]) for o in out), sum(np.asarray(o[1]) for o in out))
 
     s = bound_units(scale, value, at_bound)

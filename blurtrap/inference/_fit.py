@@ -361,9 +361,10 @@ def fit_ml_fd_newton(
     likelihoods' pass runs in fixed-size frame chunks (:mod:`._exact_chunks`: a new record
     length compiles nothing); other objectives' pass is compiled per padded length. The
     covariance is the inverse of that observed Fisher information in natural parameters.
-    Falls back to optimistix BFGS if Newton does not converge. With a parameter at its bound the others'
-    errors are the unconstrained ones (:func:`._bound_errors.release_bound`, its Hessian by
-    differences of the autodiff gradient, in the same frame chunks where they apply).
+    Falls back to optimistix BFGS if Newton does not converge. With a parameter at its bound
+    the others' errors are the unconstrained ones (:func:`._bound_errors.release_bound`, its
+    Hessian by differences of the autodiff gradient, in the same frame chunks where they
+    apply).
     """
     if _chunked.HOST_NEWTON:  # loop on the host: only the pass depends on the length
         x0 = jnp.zeros_like(scale)
