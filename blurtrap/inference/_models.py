@@ -38,7 +38,7 @@ from ..physics import expected_block_periodogram_unchecked as _expected_block_pe
 from ..physics import fold_sum, water_viscosity
 from ..physics import psd_coeffs_unchecked as _psd_coeffs
 from ..physics import rho_b_unchecked as _rho_b
-from ._nodes import N_NODES, folded_on_nodes, use_nodes
+from ._nodes import N_NODES, folded_on_nodes, node_plan, use_nodes
 
 _FLAGS = {"motion_blur": "blur", "aliasing": "alias", "tracking_noise": "noise"}
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
@@ -163,21 +163,43 @@ class TrapModel(eqx.Module):
         c1 = sigma2 * _rho_b(a, r)
         return c0, c1, jnp.exp(-r)
 
-    def psd(self, f, k, gamma, eps2, frame_interval, exposure, temperature, s2=None,
-            extras=None, block_len=None):
-        """Discrete two-sided PSD at frequencies ``f`` (shape (R, M)) of R recordings whose
-        ``k``, ``gamma``, ``frame_interval``, ``exposure``, ``temperature`` have shape (R,)
-        (or broadcast). Per-recording coefficients are computed once and broadcast.
-        ``s2 = sin^2(pi f dt)`` may be precomputed. With ``block_len`` (frames per block,
-        shape (R,)) a closed-form aliased model returns the exact *expected periodogram* of a
-        block of that length (finite-block leakage included) instead of P_d(f)."""
-        extras = extras or {}
+    def _per_recording(self, k, gamma, eps2, frame_interval, exposure, temperature):
+        """(sigma2, tau, e2, w, dt) per recording, each of shape (R,)."""
         sigma2 = BOLTZMANN * temperature / k
         tau = gamma / k * jnp.ones_like(sigma2)
         e2 = (eps2 if self.noise else 0.0) * jnp.ones_like(sigma2)
         w = self._w(exposure) * jnp.ones_like(sigma2)
         dt = frame_interval * jnp.ones_like(sigma2)
+        return sigma2, tau, e2, w, dt
+
+    def node_logp(self, f, k, gamma, frame_interval, exposure, temperature, extras=None):
+        """``log`` of the folded part of :meth:`psd` at the log-spaced nodes spanning each
+        row of ``f`` (shape (R, K), :func:`._nodes.node_plan`): what :meth:`psd` interpolates
+        where the folded spectrum goes through nodes (``nodes``)."""
+        sigma2, tau, _, w, dt = self._per_recording(k, gamma, 0.0, frame_interval, exposure,
+                                                    temperature)
+        nodes = node_plan(f, self.fold_nodes)[0]
+        return jnp.log(self._psd_folded(nodes, sigma2, tau, w, dt, temperature, extras or {}))
+
+    def psd(self, f, k, gamma, eps2, frame_interval, exposure, temperature, s2=None,
+            extras=None, block_len=None, nodes=None):
+        """Discrete two-sided PSD at frequencies ``f`` (shape (R, M)) of R recordings whose
+        ``k``, ``gamma``, ``frame_interval``, ``exposure``, ``temperature`` have shape (R,)
+        (or broadcast). Per-recording coefficients are computed once and broadcast.
+        ``s2 = sin^2(pi f dt)`` may be precomputed. With ``block_len`` (frames per block,
+        shape (R,)) a closed-form aliased model returns the exact *expected periodogram* of a
+        block of that length (finite-block leakage included) instead of P_d(f). With
+        ``nodes`` (:class:`._nodes.NodeValues`: :meth:`node_logp` and the ordinates' place
+        between the nodes, given only where the folded spectrum goes through nodes) the
+        folded part is interpolated from them."""
+        extras = extras or {}
+        sigma2, tau, e2, w, dt = self._per_recording(k, gamma, eps2, frame_interval, exposure,
+                                                     temperature)
         col = lambda x: x[:, None]  # noqa: E731
+        if nodes is not None and not (self.alias and not self.closed_form
+                                      and use_nodes(f, self.fold_nodes)):
+            raise ValueError("node values are given but this model's spectrum does not go "
+                             "through nodes at these frequencies")
         if self.closed_form and self.alias and block_len is not None:
             out = _expected_block_periodogram(f, col(block_len), col(sigma2), col(tau), col(w),
                                               col(dt), col(e2))
@@ -195,7 +217,7 @@ class TrapModel(eqx.Module):
             # terms (tracking noise below, drift, lines) stay exact at every ordinate
             folded = partial(self._psd_folded, sigma2=sigma2, tau=tau, w=w, dt=dt,
                              temperature=temperature, extras=extras)
-            out = folded_on_nodes(folded, f, self.fold_nodes) + col(e2 * dt)
+            out = folded_on_nodes(folded, f, self.fold_nodes, nodes) + col(e2 * dt)
         else:
             out = self._psd_folded(f, sigma2, tau, w, dt, temperature, extras) + col(e2 * dt)
         return out + self.additive_psd(f, col(dt), extras)

@@ -20,6 +20,8 @@ O(M).
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 #: log-spaced nodes per recording at which the folded spectrum is evaluated
@@ -34,22 +36,22 @@ def use_nodes(f, n_nodes: int = N_NODES) -> bool:
     return n_nodes > 0 and f.ndim == 2 and f.shape[-1] >= max(MIN_ORDINATES, 2 * n_nodes)
 
 
-def node_plan(f, n_nodes: int = N_NODES):
+def node_plan(f, n_nodes: int = N_NODES, xp=jnp):
     """Nodes spanning each row of ``|f|`` (shape (R, M)) and the interpolation plan:
     ``(nodes (R, K), left (R, M) int, t (R, M) in [0, 1])``. The span is from the smallest
     positive to the largest ``|f|`` of the row (the folded PSD is even, and flat at f = 0:
     a zero frequency takes the value at the lowest node). Traceable; ``f`` is data, so
-    nothing here enters a gradient."""
-    af = jnp.abs(f)
-    lo = jnp.min(jnp.where(af > 0, af, jnp.inf), axis=-1, keepdims=True)
-    hi = jnp.max(af, axis=-1, keepdims=True)
-    lo = jnp.where(jnp.isfinite(lo), lo, 1.0)
-    hi = jnp.where(hi > lo, hi, lo * 1.001)
-    h = (jnp.log(hi) - jnp.log(lo)) / (n_nodes - 1)
-    nodes = jnp.exp(jnp.log(lo) + h * jnp.arange(n_nodes))
-    u = (jnp.log(jnp.maximum(af, lo)) - jnp.log(lo)) / h
-    left = jnp.clip(jnp.floor(u), 0, n_nodes - 2).astype(jnp.int32)
-    t = jnp.clip(u - left, 0.0, 1.0)
+    nothing here enters a gradient. ``xp=numpy`` computes it on the host."""
+    af = xp.abs(f)
+    lo = xp.min(xp.where(af > 0, af, xp.inf), axis=-1, keepdims=True)
+    hi = xp.max(af, axis=-1, keepdims=True)
+    lo = xp.where(xp.isfinite(lo), lo, 1.0)
+    hi = xp.where(hi > lo, hi, lo * 1.001)
+    h = (xp.log(hi) - xp.log(lo)) / (n_nodes - 1)
+    nodes = xp.exp(xp.log(lo) + h * xp.arange(n_nodes))
+    u = (xp.log(xp.maximum(af, lo)) - xp.log(lo)) / h
+    left = xp.clip(xp.floor(u), 0, n_nodes - 2).astype(xp.int32)
+    t = xp.clip(u - left, 0.0, 1.0)
     return nodes, left, t
 
 
@@ -79,8 +81,22 @@ def hermite_log(y, left, t):
             + t * t * ((3.0 - 2.0 * t) * c[..., 2] - s * c[..., 3]))
 
 
-def folded_on_nodes(folded, f, n_nodes: int = N_NODES):
+class NodeValues(eqx.Module):
+    """The folded spectrum's log values at the nodes (R, K) and where each ordinate falls
+    between them (:func:`node_plan`'s ``left``, ``t``, (R, M)): what :func:`folded_on_nodes`
+    would compute, given (the fold once for many ordinate chunks, the plan once for many
+    evaluations)."""
+
+    logp: jax.Array
+    left: jax.Array
+    t: jax.Array
+
+
+def folded_on_nodes(folded, f, n_nodes: int = N_NODES, values: NodeValues | None = None):
     """``folded(g)`` (a positive, smooth, even spectrum; ``g`` of shape (R, K)) at every
-    ``f`` (R, M), evaluated at ``n_nodes`` log-spaced nodes and interpolated in log-log."""
+    ``f`` (R, M), evaluated at ``n_nodes`` log-spaced nodes and interpolated in log-log;
+    with ``values`` given, interpolated from them (``folded`` and ``f`` unused)."""
+    if values is not None:
+        return jnp.exp(hermite_log(values.logp, values.left, values.t))
     nodes, left, t = node_plan(f, n_nodes)
     return jnp.exp(hermite_log(jnp.log(folded(nodes)), left, t))

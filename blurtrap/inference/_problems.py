@@ -25,6 +25,7 @@ from ..effects.line_noise import traced_constants
 from ._likelihood import arma_loglik
 from ._models import TrapModel
 from ._newton import AbstractObjective
+from ._nodes import NodeValues
 from ._whittle_pass import _binned_args as _binned_args
 from ._whittle_pass import _fused_pass_applies
 from ._whittle_pass import spectral_newton_pass as spectral_newton_pass
@@ -149,16 +150,33 @@ class SpectralArgs(eqx.Module):
     log_ref: jax.Array
     block_len: jax.Array | None = None  # (R,) frames per block: exact expected periodogram
     n_ordinates: jax.Array | None = None  # (R,) real ordinates (the rest is bucket padding)
+    #: the folded spectrum at its nodes and the ordinates' place between them, given
+    #: (``_screen_stacked``: the fold once per evaluation, the ordinate chunks interpolating);
+    #: None: folded here
+    nodes: NodeValues | None = None
 
 
-def spectral_model_psd(p, a: SpectralArgs):
+def _rec_params(p, a: SpectralArgs):
+    """Per-recording (k, gamma, eps2, temperature) and the effects' parameters of ``p``."""
     k_rec, gamma, eps2 = a.layout.unpack(p)
     extras = a.layout.unpack_extras(p)
     temp = a.meta.temp
     if a.model.extra:
         k_rec, gamma, temp = a.model.relations(k_rec, gamma, temp, a.layout.power, extras)
+    return k_rec, gamma, eps2, temp, extras
+
+
+def spectral_model_psd(p, a: SpectralArgs):
+    k_rec, gamma, eps2, temp, extras = _rec_params(p, a)
     return a.model.psd(a.f, k_rec, gamma, eps2, a.meta.dt, a.meta.w, temp, s2=a.s2,
-                       extras=extras, block_len=a.block_len)
+                       extras=extras, block_len=a.block_len, nodes=a.nodes)
+
+
+def spectral_node_logp(p, a: SpectralArgs):
+    """The log folded spectrum at the nodes spanning ``a.f`` (:meth:`TrapModel.node_logp`),
+    shape (R, K), for a model whose spectrum goes through nodes at ``a.f``."""
+    k_rec, gamma, _, temp, extras = _rec_params(p, a)
+    return a.model.node_logp(a.f, k_rec, gamma, a.meta.dt, a.meta.w, temp, extras)
 
 
 def _spectral_nll(p, a: SpectralArgs):

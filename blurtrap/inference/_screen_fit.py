@@ -1,6 +1,7 @@
 """Screening fits for diagnose: the minimum of an objective without standard errors (only
 the likelihood ratio is used), by the chunked Newton loop where the fused Whittle pass applies
-(nothing compiled per padded length), else by BFGS."""
+(nothing compiled per padded length), else by BFGS: for models folded on nodes on stacked
+ordinate chunks (:mod:`._screen_stacked`: one program for records of many lengths)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import optimistix as optx
 
+from . import _screen_stacked
 from ._chunked import objective_chunkable
 from ._fit import _bfgs, _chunked_newton
 from ._whittle_pass import _fused_pass_applies as fused_pass_applies
@@ -36,10 +38,17 @@ def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=
     so that a record in a new power-of-two bucket compiles no screening program (BFGS was
     compiled per padded length: ~2.6 s per candidate model at 2^17 frames); elsewhere, or
     where Newton fails, BFGS (no Hessian: cheaper than Newton with autodiff Hessians of a
-    folded model, measured 2.1 -> 5.7 s warm on five 65 536-frame records)."""
+    folded model, measured 2.1 -> 5.7 s warm on five 65 536-frame records); for a model
+    folded on nodes on the record's stacked ordinate chunks, the fold once per evaluation
+    (:mod:`._screen_stacked`), so that a new padded length compiles nothing up to 2^18
+    ordinates."""
     if SCREEN_CHUNKED and objective_chunkable(nll, args) and fused_pass_applies(args):
         out = _chunked_newton(nll, scale, args, rtol, atol, value_atol=SCREEN_NLL_ATOL)
         if bool(out.converged) and bool(out.hessian_pd):
             return out.value, float(out.nll), True
+    stacked = _screen_stacked.stack(args) if _screen_stacked.applies(nll, args) else None
+    if stacked is not None:
+        # folded on nodes: one compiled BFGS for records of up to 2^18 ordinates
+        nll, args = _screen_stacked.stacked_nll, stacked
     p, v, ok = _bfgs_value_only(nll, scale, args, rtol, atol, max_steps)
     return p, float(v), bool(ok)

@@ -19,7 +19,7 @@ import pytest
 from _simconfig import DT, GAMMA, sim
 
 import blurtrap as bt
-from blurtrap.inference import _screen_fit
+from blurtrap.inference import _screen_fit, _screen_stacked
 
 
 def test_counter_sees_compilations(compiles):
@@ -150,19 +150,40 @@ def test_diagnose_new_record_of_the_same_bucket_no_recompile(compiles):
     assert "line_noise" in {r.effect for r in d.ranking}
 
 
-def test_diagnose_record_in_a_new_bucket_compiles_no_screening_fit(compiles, monkeypatch):
+@pytest.mark.parametrize("detector", ["camera", "photodiode"])
+def test_diagnose_record_in_a_new_bucket_compiles_no_screening_fit(compiles, monkeypatch,
+                                                                   detector):
     """diagnose's screening fits (``fit_nll_only``) run the chunked Newton loop where it
-    applies: after 40 000 frames (32 768 padded ordinates), a record of 70 000 (65 536)
-    compiles none of their programs. As BFGS (``_screen_fit.SCREEN_CHUNKED = False``) they are
-    compiled per padded length (2.6 s per candidate measured at 2^17 frames): the check can
-    fail."""
-    y = camera(5e-5, 70_000, 8)[0]
+    applies, and BFGS on stacked ordinate chunks for the models folded on nodes
+    (``_screen_stacked``: the photodiode's detector_filter and hydrodynamics): after 40 000
+    samples (32 768 padded ordinates), a record of 70 000 (65 536) compiles none of their
+    programs. As BFGS on the padded ordinates (``_screen_fit.SCREEN_CHUNKED = False``,
+    ``_screen_stacked.STACKED = False``) they are compiled per padded length (2.6 s per
+    candidate measured at 2^17 frames, 3-5 s per folded one): the check can fail. Both ways
+    give the same screening minima (delta log-likelihoods to 2e-3)."""
+    if detector == "camera":
+        y, make = camera(5e-5, 70_000, 8)[0], rec
+    else:
+        y = np.asarray(bt.simulate(5e-5, GAMMA, 1e-8, 1e-5, 70_000, key=jax.random.key(9),
+                                   method="exact_frames", tracking_std=2e-9))[0]
+
+        def make(z):
+            return bt.Recording(z, frame_interval=1e-5, exposure=1e-8)
+
     programs = ("_bfgs", "_chunk_pass", "_update", "_start", "_finish", "_newton", "_coarse")
-    for chunked in (True, False):
-        monkeypatch.setattr(_screen_fit, "SCREEN_CHUNKED", chunked)
-        bt.diagnose(rec(y[:40_000]))
+    ranks = {}
+    for fixed in (True, False):
+        monkeypatch.setattr(_screen_fit, "SCREEN_CHUNKED", fixed)
+        monkeypatch.setattr(_screen_stacked, "STACKED", fixed)
+        bt.diagnose(make(y[:40_000]))
         compiles.reset()
-        d = bt.diagnose(rec(y))
+        d = bt.diagnose(make(y))
         got = [n for n in compiles.names if any(p in n for p in programs)]
-        assert (got == []) == chunked, compiles.names
-        assert d.ranking
+        assert (got == []) == fixed, compiles.names
+        ranks[fixed] = {r.effect: r.delta_loglik for r in d.ranking
+                        if r.delta_loglik is not None}
+    if detector == "photodiode":
+        assert {"detector_filter", "hydrodynamics"} <= set(ranks[True])
+    assert ranks[True].keys() == ranks[False].keys()
+    for name, dl in ranks[True].items():
+        assert dl == pytest.approx(ranks[False][name], abs=2e-3), name
