@@ -6,17 +6,19 @@ folded candidate in every new power-of-two bucket (~13 s per ``diagnose`` of a p
 record). Newton on the host over ordinate chunks does not help them (a record without a
 filter puts detector_filter's optimum in a narrow curved valley towards alpha = 1: > 64
 Newton passes against ~180 BFGS steps; benchmarks/RESULTS.md, session 17). Here the
-record's ordinate chunks (:func:`._chunked.ordinate_chunks`, each carrying the record's
-frequency span, so every chunk has the record's nodes) are stacked to a fixed capacity of
-:data:`CAPACITY` chunks, with each ordinate's place between the nodes computed once on the
-host, and the objective runs over the real chunks only (a loop with a traced trip count,
-:data:`GROUP` chunks per trip), with the fold once per evaluation: the value and gradient
-come from one evaluation of the nodes (:meth:`TrapModel.node_logp`) and its VJP, and per
-trip the value and gradient of the Whittle sum with the node values as an input. The
+record's ordinates (bucket padding left out) are cut into chunks of
+:data:`._chunked.CHUNK` and stacked to a fixed capacity of :data:`CAPACITY` chunks, each
+ordinate's place between the record's nodes computed once on the host, and the objective
+runs over the real chunks only (a loop with a traced trip count, :data:`GROUP` chunks per
+trip), with the fold once per evaluation: the value and gradient come from one evaluation
+of the nodes (:meth:`TrapModel.node_logp` at the record's frequency span) and its VJP, and
+per trip the value and gradient of the Whittle sum with the node values as an input. The
 objective is a :func:`jax.custom_jvp` whose tangent is the gradient's dot product (linear:
-BFGS linearises and transposes it). So every record of up to ``CAPACITY * CHUNK``
-ordinates shares one compiled program per model and number of recordings; the padding
-chunks cost memory (``CAPACITY x R x CHUNK x 6`` numbers, 12 MB per recording), not time.
+BFGS linearises and transposes it; tangents of the data are ignored: differentiable in the
+parameters only). So every record of up to ``CAPACITY * CHUNK`` ordinates shares one
+compiled program per model and number of recordings. The stack costs memory (``CAPACITY x
+R x CHUNK x 6`` numbers, 12 MB per recording) and the last trip's padding chunks time (at
+most ``GROUP - 1`` chunks per evaluation).
 """
 
 from __future__ import annotations
@@ -34,12 +36,12 @@ from ._problems import SpectralArgs, SpectralObjective, _spectral_nll, spectral_
 
 #: the number of chunks the stack holds (a multiple of :data:`GROUP`): records of up to
 #: ``CAPACITY * CHUNK`` ordinates (2^18: 2^19 samples) are stacked; longer ones keep BFGS on
-#: their padded ordinates (compiled per padded length, faster there when warm: the whole
-#: program hoists the ordinates' data-only work out of its loop; 2^20 samples, one
-#: photodiode record: detector_filter + hydrodynamics screens 4.8 s compiled, 7.5 s stacked)
+#: their padded ordinates (compiled per padded length; the stack's memory would grow with
+#: the capacity for every record)
 CAPACITY = 16
-#: chunks evaluated together in each trip of the loop: larger arrays per operation
-GROUP = 4
+#: chunks evaluated together in each trip of the loop (2 was faster than 1 and 4 at 2^15 and
+#: 2^17 ordinates)
+GROUP = 2
 #: screening fits of models folded on nodes on stacked chunks; False: BFGS compiled per
 #: padded length (the previous behaviour)
 STACKED = True
@@ -51,7 +53,7 @@ class StackedChunks(eqx.Module):
     ordinate's place between the nodes (``left``, ``t``: :func:`._nodes.node_plan`, on the
     host once, not in every evaluation)."""
 
-    first: SpectralArgs  # the first chunk: structure, meta and the frequency span
+    first: SpectralArgs  # structure and meta; its frequencies: each row's span (R, 2)
     f: jax.Array  # (C / GROUP, R, GROUP W): the chunks of each trip side by side
     s2: jax.Array
     power: jax.Array
@@ -69,39 +71,44 @@ def applies(nll, args) -> bool:
 
 
 def stack(args: SpectralArgs) -> StackedChunks | None:
-    """``args``' ordinate chunks (bucket padding skipped) stacked to :data:`CAPACITY`, or
-    None where they are more."""
-    chunks = _chunked.ordinate_chunks(args)
-    n = len(chunks)
-    cap = CAPACITY
-    if n > cap:
+    """``args``' ordinates up to the last one of weight > 0 in chunks of
+    :data:`._chunked.CHUNK`, stacked to :data:`CAPACITY` chunks (the last real chunk and the
+    padding chunks: copies of the last ordinate at weight 0), each ordinate's place between
+    the record's nodes computed here on the host; None where they take more chunks."""
+    width = _chunked.CHUNK
+    if width is None:  # chunking off
         return None
-    fold_nodes = args.model.fold_nodes
-    plans = [node_plan(np.asarray(c.f), fold_nodes, xp=np)[1:] for c in chunks]
+    f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
+    used = np.nonzero(np.any(wt != 0, axis=0))[0]
+    m_real = int(used[-1]) + 1 if used.size else 1
+    n = -(-m_real // width)
+    if n > CAPACITY:
+        return None
+    _, left, t = node_plan(f, args.model.fold_nodes, xp=np)  # the whole record's nodes
+    size = CAPACITY * width
 
-    def stacked(parts, zero_pad=False):
-        # (C, R, W, ...) -> (C / GROUP, R, GROUP W, ...): each trip's ordinates contiguous
-        z = np.stack(parts)
-        pad = np.repeat(z[-1:], cap - n, axis=0)
-        z = np.concatenate([z, np.zeros_like(pad) if zero_pad else pad])
-        c, r, w = z.shape[:3]
-        return jnp.asarray(np.moveaxis(z.reshape(c // GROUP, GROUP, r, w, *z.shape[3:]), 1, 2)
-                           .reshape(c // GROUP, r, GROUP * w, *z.shape[3:]))
+    def stacked(z, zero_pad=False):
+        z = z[:, :m_real]
+        z = np.pad(z, [(0, 0), (0, size - m_real)], mode="constant" if zero_pad else "edge")
+        # (R, C W) -> (C / GROUP, R, GROUP W): the chunks of each trip side by side
+        return jnp.asarray(np.moveaxis(z.reshape(z.shape[0], CAPACITY // GROUP, -1), 0, 1))
 
-    def field(name):
-        return [np.asarray(getattr(c, name)) for c in chunks]
-
-    return StackedChunks(first=chunks[0], f=stacked(field("f")), s2=stacked(field("s2")),
-                         power=stacked(field("power")),
-                         weight=stacked(field("weight"), zero_pad=True),
-                         left=stacked([q[0] for q in plans]), t=stacked([q[1] for q in plans]),
+    # the node stage's frequencies: each row's span (smallest positive and largest |f|), so
+    # that :meth:`TrapModel.node_logp` places the record's nodes
+    af = np.abs(f)
+    span = np.concatenate([np.min(np.where(af > 0, af, np.inf), axis=-1, keepdims=True),
+                           np.max(af, axis=-1, keepdims=True)], axis=-1)
+    first = eqx.tree_at(lambda a: (a.f, a.s2, a.power, a.weight), args,
+                        (jnp.asarray(span), jnp.zeros_like(jnp.asarray(span)),
+                         jnp.ones_like(jnp.asarray(span)), jnp.zeros_like(jnp.asarray(span))))
+    return StackedChunks(first=first, f=stacked(f), s2=stacked(s2), power=stacked(pw),
+                         weight=stacked(wt, zero_pad=True), left=stacked(left), t=stacked(t),
                          n=jnp.asarray(n, dtype=jnp.int32))
 
 
 def _group(s: StackedChunks, i, y) -> SpectralArgs:
-    """Chunks ``i * GROUP ... (i + 1) * GROUP - 1`` side by side (one chunk of
-    ``GROUP * CHUNK`` ordinates; their span ordinates carry weight 0) with the node values
-    ``y`` given."""
+    """Chunks ``i * GROUP ... (i + 1) * GROUP - 1`` side by side (one piece of
+    ``GROUP * CHUNK`` ordinates) with the node values ``y`` given."""
     def cut(z):
         return jax.lax.dynamic_index_in_dim(z, i, axis=0, keepdims=False)  # (R, G W)
 
@@ -143,7 +150,8 @@ def _value(p, s: StackedChunks):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _nll(p, dynamic, static):
-    # the value alone (BFGS's line search): no gradient carried through the loop
+    # the value alone (BFGS's last evaluation, the value fit_nll_only returns: optimistix's
+    # BFGS linearises at every trial point, i.e. runs the rule below): no gradient carried
     return _value(p, eqx.combine(dynamic, static))
 
 

@@ -49,20 +49,28 @@ def _p(a):
     return jnp.asarray([5.2e-5, 4.7e-5, 1.04 * GAMMA, 4e-18, 1.6e-6, 1e-20][:len(a.layout.names)])
 
 
-def test_stacked_objective_equals_the_whole_objective(hydro_args, monkeypatch):
-    """Value (1e-12), gradient by reverse mode and directional derivative by forward mode
-    (1e-9 of the largest entry) of the stacked objective equal autodiff of the whole
-    objective; the stack holds 2 real chunks in a capacity of 16. More chunks than the
-    capacity are not stacked."""
+@pytest.mark.parametrize("chunk, n_chunks", [(None, 2), (4096, 5)],
+                         ids=["2 chunks, one trip", "5 chunks, two trips"])
+def test_stacked_objective_equals_the_whole_objective(hydro_args, monkeypatch, chunk,
+                                                      n_chunks):
+    """Value (1e-12; the plain call, as BFGS's last evaluation, and inside the derivatives),
+    gradient by reverse mode and directional derivative by forward mode (1e-9 of the largest
+    entry) of the stacked objective equal autodiff of the whole objective; 20 000 real
+    ordinates of 32 768 in chunks of 16 384 (one trip of the loop) or 4096 (two trips, the
+    second partly padding). More chunks than the capacity are not stacked."""
+    if chunk is not None:
+        monkeypatch.setattr(_chunked, "CHUNK", chunk)
     a = hydro_args
     assert _screen_stacked.applies(spectral_nll, a)
     s = _screen_stacked.stack(a)
     cap, group = _screen_stacked.CAPACITY, _screen_stacked.GROUP
-    assert int(s.n) == 2 and s.f.shape == (cap // group, 2, group * _chunked.CHUNK)
+    assert int(s.n) == n_chunks and s.f.shape == (cap // group, 2, group * _chunked.CHUNK)
     p = _p(a)
     want_v, want_g = jax.jit(jax.value_and_grad(_spectral_nll))(p, a)
     got_v, got_g = jax.jit(jax.value_and_grad(_screen_stacked.stacked_nll))(p, s)
     assert float(got_v) == pytest.approx(float(want_v), rel=1e-12)
+    plain = jax.jit(_screen_stacked.stacked_nll)(p, s)
+    assert float(plain) == pytest.approx(float(want_v), rel=1e-12)
     scale = np.max(np.abs(np.asarray(want_g * p)))
     np.testing.assert_allclose(np.asarray(got_g * p), np.asarray(want_g * p), rtol=0,
                                atol=1e-9 * scale)
@@ -70,7 +78,7 @@ def test_stacked_objective_equals_the_whole_objective(hydro_args, monkeypatch):
     _, jvp = jax.jit(lambda q: jax.jvp(lambda z: _screen_stacked.stacked_nll(z, s), (q,),
                                        (dp,)))(p)
     assert float(jvp) == pytest.approx(float(jnp.dot(want_g, dp)), abs=1e-9 * scale)
-    monkeypatch.setattr(_screen_stacked, "CAPACITY", 1)
+    monkeypatch.setattr(_screen_stacked, "CAPACITY", n_chunks - 1)
     assert _screen_stacked.stack(a) is None
 
 
