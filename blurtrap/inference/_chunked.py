@@ -24,7 +24,7 @@ import numpy as np
 import optimistix as optx
 
 from ._newton import SafeguardedNewton
-from ._nodes import use_nodes
+from ._nodes import frequency_span, use_nodes
 from ._problems import SpectralArgs, SpectralObjective
 from ._whittle_pass import (
     _COARSE_GROUPS,
@@ -123,9 +123,7 @@ def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
     size = ordinate_step(args)
     span = None
     if _spans_nodes(args):
-        af = np.abs(f)
-        lo = np.min(np.where(af > 0, af, np.inf), axis=-1, keepdims=True)
-        span = np.concatenate([lo, np.max(af, axis=-1, keepdims=True)], axis=-1)
+        span = frequency_span(f, np)
         dt = np.asarray(args.meta.dt, float).reshape(-1, 1) * np.ones((f.shape[0], 1))
         span_s2 = np.sin(np.pi * span * dt) ** 2
     out = []

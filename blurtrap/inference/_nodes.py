@@ -36,6 +36,15 @@ def use_nodes(f, n_nodes: int = N_NODES) -> bool:
     return n_nodes > 0 and f.ndim == 2 and f.shape[-1] >= max(MIN_ORDINATES, 2 * n_nodes)
 
 
+def frequency_span(f, xp=jnp):
+    """Each row's smallest positive and largest ``|f|`` (shape (R, 2); inf where no
+    frequency is positive): what :func:`node_plan` spans its nodes over, so that frequencies
+    with the same span have the same nodes."""
+    af = xp.abs(f)
+    return xp.concatenate([xp.min(xp.where(af > 0, af, xp.inf), axis=-1, keepdims=True),
+                           xp.max(af, axis=-1, keepdims=True)], axis=-1)
+
+
 def node_plan(f, n_nodes: int = N_NODES, xp=jnp):
     """Nodes spanning each row of ``|f|`` (shape (R, M)) and the interpolation plan:
     ``(nodes (R, K), left (R, M) int, t (R, M) in [0, 1])``. The span is from the smallest
@@ -43,8 +52,8 @@ def node_plan(f, n_nodes: int = N_NODES, xp=jnp):
     a zero frequency takes the value at the lowest node). Traceable; ``f`` is data, so
     nothing here enters a gradient. ``xp=numpy`` computes it on the host."""
     af = xp.abs(f)
-    lo = xp.min(xp.where(af > 0, af, xp.inf), axis=-1, keepdims=True)
-    hi = xp.max(af, axis=-1, keepdims=True)
+    span = frequency_span(f, xp)
+    lo, hi = span[..., :1], span[..., 1:]
     lo = xp.where(xp.isfinite(lo), lo, 1.0)
     hi = xp.where(hi > lo, hi, lo * 1.001)
     h = (xp.log(hi) - xp.log(lo)) / (n_nodes - 1)

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _chunked
-from ._nodes import NodeValues, node_plan
+from ._nodes import NodeValues, frequency_span, node_plan
 from ._problems import SpectralArgs, SpectralObjective, _spectral_nll, spectral_node_logp
 
 #: the number of chunks the stack holds (a multiple of :data:`GROUP`): records of up to
@@ -93,14 +93,11 @@ def stack(args: SpectralArgs) -> StackedChunks | None:
         # (R, C W) -> (C / GROUP, R, GROUP W): the chunks of each trip side by side
         return jnp.asarray(np.moveaxis(z.reshape(z.shape[0], CAPACITY // GROUP, -1), 0, 1))
 
-    # the node stage's frequencies: each row's span (smallest positive and largest |f|), so
-    # that :meth:`TrapModel.node_logp` places the record's nodes
-    af = np.abs(f)
-    span = np.concatenate([np.min(np.where(af > 0, af, np.inf), axis=-1, keepdims=True),
-                           np.max(af, axis=-1, keepdims=True)], axis=-1)
+    # the node stage's frequencies: each row's span, so that :meth:`TrapModel.node_logp`
+    # places the record's nodes
+    span = jnp.asarray(frequency_span(f, np))
     first = eqx.tree_at(lambda a: (a.f, a.s2, a.power, a.weight), args,
-                        (jnp.asarray(span), jnp.zeros_like(jnp.asarray(span)),
-                         jnp.ones_like(jnp.asarray(span)), jnp.zeros_like(jnp.asarray(span))))
+                        (span, jnp.zeros_like(span), jnp.ones_like(span), jnp.zeros_like(span)))
     return StackedChunks(first=first, f=stacked(f), s2=stacked(s2), power=stacked(pw),
                          weight=stacked(wt, zero_pad=True), left=stacked(left), t=stacked(t),
                          n=jnp.asarray(n, dtype=jnp.int32))
