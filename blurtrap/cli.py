@@ -71,7 +71,9 @@ def main(argv=None) -> int:
     import os
 
     from . import enable_compilation_cache, enable_x64
+    from ._config import faster_compilation
 
+    faster_compilation()  # before the first computation: XLA reads its flags once
     enable_x64()
     if not os.environ.get("BLURTRAP_NO_CACHE"):
         try:  # compiled programs on disk: the second run of a command skips compilation
