@@ -86,13 +86,16 @@ def enable_compilation_cache(path: str | None = None) -> str:
 
 #: XLA:CPU flag that ``faster_compilation`` adds: the classic loop emitters instead of the
 #: newer MLIR fusion emitters. Measured on blurtrap's programs (benchmarks/RESULTS.md,
-#: "Compilation flags"): compilation 1.3-2x faster at equal or better run time, except the
-#: Brownian-dynamics scan (+30 % run time).
+#: "Compilation flags"): first call (compilation + one run) 1.2-1.7x faster, warm run times
+#: within 10 %; the Brownian-dynamics scan pins XLA's default emitters per program
+#: (``simulate._core``), where the flag made it 35 % slower warm.
 FAST_COMPILE_FLAG = "--xla_cpu_use_fusion_emitters=false"
 #: jaxlib releases known to accept the flag (checked in their binaries: 0.5.1 lacks it,
 #: 0.5.3 to 0.10 have it). XLA aborts the process on an unknown flag, so releases outside
 #: this range are left alone.
 _FAST_COMPILE_JAXLIB = ((0, 5, 3), (0, 11, 0))
+#: set (to anything but "" or "0") to keep XLA's default flags in the CLI and the tests
+NO_FAST_COMPILE_ENV = "BLURTRAP_DEFAULT_XLA"
 
 
 def _jaxlib_release() -> tuple[int, ...]:
@@ -106,23 +109,46 @@ def _jaxlib_release() -> tuple[int, ...]:
         return (0,)
 
 
+def fusion_emitters_option_known() -> bool:
+    """Whether this jaxlib knows ``xla_cpu_use_fusion_emitters`` (as a flag or as a per-jit
+    compiler option)."""
+    low, high = _FAST_COMPILE_JAXLIB
+    return low <= _jaxlib_release() < high
+
+
+def _flag_value(flags: str) -> str | None:
+    """The value ``$XLA_FLAGS`` gives ``xla_cpu_use_fusion_emitters`` (the last one wins, as
+    in XLA), lower case; None where it does not name it."""
+    value = None
+    for token in flags.split():
+        name, _, val = token.lstrip("-").partition("=")
+        if name == "xla_cpu_use_fusion_emitters":
+            value = (val or "true").lower()
+    return value
+
+
 def faster_compilation() -> bool:
     """Add :data:`FAST_COMPILE_FLAG` to ``$XLA_FLAGS`` for this process (and the processes
     it starts) when that is safe: the installed jaxlib accepts the flag, JAX has not yet
-    started its backends (the flags are read once, then) and ``$XLA_FLAGS`` does not set it
-    already. The CLI and the test-suite call it first; a Python user may call it right after
-    ``import blurtrap``. Results are unchanged (to rounding). Returns whether the flag is in
-    effect for this process."""
+    started its backends (the flags are read once, then), ``$XLA_FLAGS`` does not set it
+    already and ``$BLURTRAP_DEFAULT_XLA`` is not set. The CLI and the test-suite call it
+    before their first computation; ``import blurtrap`` does not (XLA's flags are
+    process-wide). Results are unchanged to rounding. Returns whether the flag is in effect
+    for this process."""
     import os
 
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_cpu_use_fusion_emitters" in flags:
-        return FAST_COMPILE_FLAG in flags.split()
-    low, high = _FAST_COMPILE_JAXLIB
-    if not low <= _jaxlib_release() < high:
+    named = _flag_value(flags)
+    if named is not None:  # the user's own setting wins
+        return named in ("false", "0")
+    if os.environ.get(NO_FAST_COMPILE_ENV, "") not in ("", "0"):
         return False
-    from jax._src import xla_bridge
-
+    if not fusion_emitters_option_known():
+        return False
+    try:
+        from jax._src import xla_bridge
+    except ImportError:  # pragma: no cover - a jax without this private module
+        return False
     started = getattr(xla_bridge, "backends_are_initialized", None)
     if started is None or started():
         return False
