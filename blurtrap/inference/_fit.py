@@ -46,6 +46,7 @@ from ._newton import (
     fd_hessian_pass,
     newton_iterate,
     newton_minimise,
+    not_above,
 )
 
 #: Newton iterations before giving up (the BFGS fallback takes over)
@@ -202,7 +203,8 @@ def _newton_fit(nll, scale, args, rtol, atol, max_steps=NEWTON_STEPS) -> _Newton
     """Newton fit from the closed-form start ``p = scale`` (``x = 0``), preceded by a fit of
     the objective's coarse version when it has one (start values within ~1e-3 of the optimum
     for a small fraction of the cost of one pass). Reported as converged only if the step
-    criterion is met at a finite point that does not raise the objective above its start.
+    criterion is met at a finite point that does not raise the objective above its start
+    (to rounding: :func:`._newton.not_above`).
 
     ``x_hat = x - dx`` is the estimate (the final Newton step applied), ``value`` its
     objective from the local quadratic model (error O(|dx|^3)); gradient and Hessian are
@@ -224,7 +226,7 @@ def _coarse_start(c, x0):
     at the closed-form start ``x0`` (quadratic model at the last step)."""
     xc = c.x - c.step
     good = (c.done & jnp.all(jnp.isfinite(xc))
-            & (c.value - 0.5 * jnp.dot(c.grad, c.step) <= c.value_start))
+            & not_above(c.value - 0.5 * jnp.dot(c.grad, c.step), c.value_start))
     return jnp.where(good, xc, x0)
 
 
@@ -232,7 +234,7 @@ def _fit_from_state(st, sol_result) -> _NewtonFit:
     """:class:`_NewtonFit` from the final Newton state and the minimiser's result code."""
     x_hat = st.x - st.step
     v_hat = st.value - 0.5 * jnp.dot(st.grad, st.step)
-    ok = st.done & jnp.all(jnp.isfinite(x_hat)) & (v_hat <= st.value_start)
+    ok = st.done & jnp.all(jnp.isfinite(x_hat)) & not_above(v_hat, st.value_start)
     result = optx.RESULTS.where(
         ok, optx.RESULTS.successful,
         optx.RESULTS.where(sol_result == optx.RESULTS.successful,

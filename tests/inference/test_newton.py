@@ -143,3 +143,34 @@ def test_fd_newton_fit_agrees_with_the_exact_hessian_fit_and_scipy():
     np.testing.assert_allclose(np.asarray(fd.value), [a, 1 / sc], rtol=1e-4)
     np.testing.assert_allclose(np.asarray(fd.value), np.asarray(ad.value), rtol=1e-8)
     np.testing.assert_allclose(np.asarray(fd.cov), np.asarray(ad.cov), rtol=1e-6)
+
+
+def test_a_fit_started_at_its_optimum_converges_despite_rounding_in_the_value():
+    """Started at the optimum (as after an exact coarse fit) of an objective of size ~1e6
+    whose later evaluations come out a few 1e-15 relative higher (a long record's sum in
+    another order), the host Newton loop stops after one step and the fit counts as converged
+    (before: the end value above the start by rounding failed the check, and calibrate fell
+    back to BFGS compiled per padded length: a 1.5e6-sample photodiode record)."""
+    from blurtrap.inference import _chunked
+
+    calls = []
+    x_opt = jnp.array([0.3, -0.2])
+
+    def pass_fn(x):
+        calls.append(1)
+        d = x - x_opt
+        noise = 0.0 if len(calls) == 1 else 3e-9  # later passes: +3e-15 relative
+        v = 1e6 + 0.5e5 * jnp.dot(d, d) + noise
+        return v, 1e5 * d, 1e5 * jnp.eye(2)
+
+    # 1e-7 from the optimum: one Newton step, whose end value is above the start by rounding
+    st, res = _chunked.host_newton_loop(pass_fn, x_opt + 1e-7, 1e-9, 1e-9, 64)
+    assert len(calls) == 2 and float(st.value) > float(st.value_start)
+    fit = _fit._fit_from_state(st, res)
+    assert bool(fit.ok) and res == optx.RESULTS.successful
+    np.testing.assert_allclose(np.asarray(fit.x_hat), np.asarray(x_opt), atol=1e-12)
+    # a real increase above the start is still refused (rounding allowance 1e-12 relative)
+    from blurtrap.inference._newton import not_above
+
+    assert bool(not_above(1e6 + 3e-10, 1e6)) and bool(not_above(-1e6 + 3e-10, -1e6))
+    assert not bool(not_above(1e6 + 1e-3, 1e6)) and not bool(not_above(2e-12, 0.0))
