@@ -40,15 +40,15 @@ def fit_nll_only(nll: Callable, scale, args, *, rtol=1e-8, atol=1e-8, max_steps=
     where Newton fails, BFGS (no Hessian: cheaper than Newton with autodiff Hessians of a
     folded model, measured 2.1 -> 5.7 s warm on five 65 536-frame records); for a model
     folded on nodes on the record's stacked ordinate chunks, the fold once per evaluation
-    (:mod:`._screen_stacked`), so that a new padded length compiles nothing up to 2^18
-    ordinates."""
+    (:mod:`._screen_stacked`), so that a new padded length compiles nothing within a
+    capacity (2^19, 2^21, 2^23 samples)."""
     if SCREEN_CHUNKED and objective_chunkable(nll, args) and fused_pass_applies(args):
         out = _chunked_newton(nll, scale, args, rtol, atol, value_atol=SCREEN_NLL_ATOL)
         if bool(out.converged) and bool(out.hessian_pd):
             return out.value, float(out.nll), True
     stacked = _screen_stacked.stack(args) if _screen_stacked.applies(nll, args) else None
     if stacked is not None:
-        # folded on nodes: one compiled BFGS for records of up to 2^18 ordinates
+        # folded on nodes: one compiled BFGS per capacity of the stack (up to 2^22 ordinates)
         nll, args = _screen_stacked.stacked_nll, stacked
     p, v, ok = _bfgs_value_only(nll, scale, args, rtol, atol, max_steps)
     return p, float(v), bool(ok)

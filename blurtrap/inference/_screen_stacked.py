@@ -7,7 +7,7 @@ record). Newton on the host over ordinate chunks does not help them (a record wi
 filter puts detector_filter's optimum in a narrow curved valley towards alpha = 1: > 64
 Newton passes against ~180 BFGS steps; benchmarks/RESULTS.md, session 17). Here the
 record's ordinates (bucket padding left out) are cut into chunks of
-:data:`._chunked.CHUNK` and stacked to a fixed capacity of :data:`CAPACITY` chunks, each
+:data:`._chunked.CHUNK` and stacked to a fixed capacity (:data:`CAPACITIES` chunks), each
 ordinate's place between the record's nodes computed once on the host, and the objective
 runs over the real chunks only (a loop with a traced trip count, :data:`GROUP` chunks per
 trip), with the fold once per evaluation: the value and gradient come from one evaluation
@@ -15,10 +15,11 @@ of the nodes (:meth:`TrapModel.node_logp` at the record's frequency span) and it
 per trip the value and gradient of the Whittle sum with the node values as an input. The
 objective is a :func:`jax.custom_jvp` whose tangent is the gradient's dot product (linear:
 BFGS linearises and transposes it; tangents of the data are ignored: differentiable in the
-parameters only). So every record of up to ``CAPACITY * CHUNK`` ordinates shares one
-compiled program per model and number of recordings. The stack costs memory (``CAPACITY x
-R x CHUNK x 6`` numbers, 12 MB per recording) and the last trip's padding chunks time (at
-most ``GROUP - 1`` chunks per evaluation).
+parameters only). So every record of up to ``capacity * CHUNK`` ordinates shares one
+compiled program per model, number of recordings and capacity (:data:`CAPACITIES`). The
+stack costs memory (``capacity x R x CHUNK x 6`` numbers: 12 MB per recording at 16
+chunks) and the last trip's padding chunks time (at most ``GROUP - 1`` chunks per
+evaluation).
 """
 
 from __future__ import annotations
@@ -34,11 +35,13 @@ from . import _chunked
 from ._nodes import NodeValues, frequency_span, node_plan
 from ._problems import SpectralArgs, SpectralObjective, _spectral_nll, spectral_node_logp
 
-#: the number of chunks the stack holds (a multiple of :data:`GROUP`): records of up to
-#: ``CAPACITY * CHUNK`` ordinates (2^18: 2^19 samples) are stacked; longer ones keep BFGS on
-#: their padded ordinates (compiled per padded length; the stack's memory would grow with
-#: the capacity for every record)
-CAPACITY = 16
+#: the numbers of chunks a stack holds (each a multiple of :data:`GROUP`), smallest first: a
+#: record takes the smallest that fits its chunks, so one program per capacity serves every
+#: length up to it (16: 2^18 ordinates, 2^19 samples; 64: 2^21 samples; 256: 2^23 samples)
+#: and the stack's memory stays within 4x the record's (a single large capacity would cost
+#: every short record its memory); longer records keep BFGS on their padded ordinates
+#: (compiled per padded length)
+CAPACITIES = (16, 64, 256)
 #: chunks evaluated together in each trip of the loop (2 was faster than 1 and 4 at 2^15 and
 #: 2^17 ordinates)
 GROUP = 2
@@ -72,9 +75,10 @@ def applies(nll, args) -> bool:
 
 def stack(args: SpectralArgs) -> StackedChunks | None:
     """``args``' ordinates up to the last one of weight > 0 in chunks of
-    :data:`._chunked.CHUNK`, stacked to :data:`CAPACITY` chunks (the last real chunk and the
-    padding chunks: copies of the last ordinate at weight 0), each ordinate's place between
-    the record's nodes computed here on the host; None where they take more chunks."""
+    :data:`._chunked.CHUNK`, stacked to the smallest of :data:`CAPACITIES` that holds them
+    (the last real chunk and the padding chunks: copies of the last ordinate at weight 0),
+    each ordinate's place between the record's nodes computed here on the host; None where
+    they take more chunks than the largest."""
     width = _chunked.CHUNK
     if width is None:  # chunking off
         return None
@@ -82,16 +86,17 @@ def stack(args: SpectralArgs) -> StackedChunks | None:
     used = np.nonzero(np.any(wt != 0, axis=0))[0]
     m_real = int(used[-1]) + 1 if used.size else 1
     n = -(-m_real // width)
-    if n > CAPACITY:
+    capacity = next((c for c in CAPACITIES if n <= c), None)
+    if capacity is None:
         return None
     _, left, t = node_plan(f, args.model.fold_nodes, xp=np)  # the whole record's nodes
-    size = CAPACITY * width
+    size = capacity * width
 
     def stacked(z, zero_pad=False):
         z = z[:, :m_real]
         z = np.pad(z, [(0, 0), (0, size - m_real)], mode="constant" if zero_pad else "edge")
         # (R, C W) -> (C / GROUP, R, GROUP W): the chunks of each trip side by side
-        return jnp.asarray(np.moveaxis(z.reshape(z.shape[0], CAPACITY // GROUP, -1), 0, 1))
+        return jnp.asarray(np.moveaxis(z.reshape(z.shape[0], capacity // GROUP, -1), 0, 1))
 
     # the node stage's frequencies: each row's span, so that :meth:`TrapModel.node_logp`
     # places the record's nodes

@@ -57,13 +57,14 @@ def test_stacked_objective_equals_the_whole_objective(hydro_args, monkeypatch, c
     gradient by reverse mode and directional derivative by forward mode (1e-9 of the largest
     entry) of the stacked objective equal autodiff of the whole objective; 20 000 real
     ordinates of 32 768 in chunks of 16 384 (one trip of the loop) or 4096 (two trips, the
-    second partly padding). More chunks than the capacity are not stacked."""
+    second partly padding). The next capacity (more padding) gives the same value; more
+    chunks than the largest capacity are not stacked."""
     if chunk is not None:
         monkeypatch.setattr(_chunked, "CHUNK", chunk)
     a = hydro_args
     assert _screen_stacked.applies(spectral_nll, a)
     s = _screen_stacked.stack(a)
-    cap, group = _screen_stacked.CAPACITY, _screen_stacked.GROUP
+    cap, group = _screen_stacked.CAPACITIES[0], _screen_stacked.GROUP
     assert int(s.n) == n_chunks and s.f.shape == (cap // group, 2, group * _chunked.CHUNK)
     p = _p(a)
     want_v, want_g = jax.jit(jax.value_and_grad(_spectral_nll))(p, a)
@@ -78,7 +79,13 @@ def test_stacked_objective_equals_the_whole_objective(hydro_args, monkeypatch, c
     _, jvp = jax.jit(lambda q: jax.jvp(lambda z: _screen_stacked.stacked_nll(z, s), (q,),
                                        (dp,)))(p)
     assert float(jvp) == pytest.approx(float(jnp.dot(want_g, dp)), abs=1e-9 * scale)
-    monkeypatch.setattr(_screen_stacked, "CAPACITY", n_chunks - 1)
+    # the smallest capacity that holds the chunks (the same sums), none beyond the largest
+    monkeypatch.setattr(_screen_stacked, "CAPACITIES", (n_chunks - 1, 2 * n_chunks + 2))
+    s2 = _screen_stacked.stack(a)
+    assert s2.f.shape == ((2 * n_chunks + 2) // group, 2, group * _chunked.CHUNK)
+    assert float(jax.jit(_screen_stacked.stacked_nll)(p, s2)) == pytest.approx(
+        float(want_v), rel=1e-12)
+    monkeypatch.setattr(_screen_stacked, "CAPACITIES", (n_chunks - 1,))
     assert _screen_stacked.stack(a) is None
 
 
