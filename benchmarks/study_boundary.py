@@ -3,6 +3,7 @@
 Run:  python benchmarks/study_boundary.py run --regime whittle --n 1000 --out b_whittle.npz
       python benchmarks/study_boundary.py run --regime exact --n 1000 --out b_exact.npz
       python benchmarks/study_boundary.py report b_whittle.npz b_exact.npz
+      python benchmarks/study_boundary.py merge b_exact.npz b_exact_1.npz b_exact_2.npz
       python benchmarks/study_boundary.py compare before.npz after.npz  # Wald, same data
 
 Camera 1500 fps, exposure W = 0.1 dt, eps = 2 nm, k = 0.05 pN/nm, bead radius 1.53 um in water
@@ -225,7 +226,9 @@ def report(paths):
         m = len(val)
         fb = bound[:, 2].mean()
         print(f"\n### {d['regime']}: {int(d['n_frames'])} frames, {m} datasets "
-              f"({(~ok).sum()} FitError), seed {int(d['seed'])}, {float(d['wall']):.0f} s\n")
+              f"({(~ok).sum()} FitError), seed(s) "
+              f"{[int(x) for x in d['seeds']] if 'seeds' in d else int(d['seed'])}, "
+              f"{float(d['wall']):.0f} s\n")
         print(f"eps^2 at its bound: {fb * 100:.1f} % +- {100 * math.sqrt(fb * (1 - fb) / m):.1f} %;"
               f" fit {np.nanmedian(d['t_fit']) * 1e3:.0f} ms, intervals "
               f"{np.nanmedian(d['t_int']) * 1e3:.0f} ms (medians)\n")
@@ -302,6 +305,25 @@ def compare(before, after):
           f"(all), {100 * math.sqrt(0.95 * 0.05 / max(nb, 1)):.1f} (at bound).")
 
 
+_ROWS = ("val", "err", "lo", "hi", "profiled", "bound", "unc", "t_fit", "t_int", "ok")
+
+
+def merge(out, paths):
+    """Runs of one regime with different seeds (e.g. one per core) as one file: the rows
+    concatenated, the wall times summed, the first seed kept (all listed in ``seeds``)."""
+    ds = [np.load(p, allow_pickle=False) for p in paths]
+    regimes = {str(d["regime"]) for d in ds}
+    if len(regimes) != 1:
+        raise SystemExit(f"merge: runs of different regimes {sorted(regimes)}")
+    seeds = [int(d["seed"]) for d in ds]
+    if len(set(seeds)) != len(seeds):
+        raise SystemExit(f"merge: the same seed twice {seeds} (the same datasets)")
+    np.savez(out, regime=ds[0]["regime"], n_frames=ds[0]["n_frames"], seed=seeds[0],
+             seeds=np.asarray(seeds), wall=sum(float(d["wall"]) for d in ds),
+             **{key: np.concatenate([d[key] for d in ds]) for key in _ROWS})
+    print(f"{out}: {sum(len(d['ok']) for d in ds)} datasets from seeds {seeds}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -317,6 +339,9 @@ def main(argv=None):
                    help="no intervals and no unconstrained refit (errors only)")
     p = sub.add_parser("report")
     p.add_argument("paths", nargs="+")
+    m = sub.add_parser("merge", help="runs of one regime with different seeds as one file")
+    m.add_argument("out")
+    m.add_argument("paths", nargs="+")
     c = sub.add_parser("compare", help="Wald coverage before/after on the same datasets")
     c.add_argument("before")
     c.add_argument("after")
@@ -327,6 +352,8 @@ def main(argv=None):
         run_batched(a.n, a.out, a.seed)
     elif a.cmd == "run":
         run(a.regime, a.n, a.out, a.seed, wald_only=a.wald_only)
+    elif a.cmd == "merge":
+        merge(a.out, a.paths)
     elif a.cmd == "compare":
         compare(a.before, a.after)
     else:
