@@ -30,13 +30,6 @@ from jaxtyping import Array, Bool, Float, Int
 #: relative rounding allowance of the decrease test (objective values of ~1e6 agree to ~1e-10
 #: relative between passes that sum the same terms in different order)
 _ROUNDING = 1e-12
-
-
-def not_above(value, reference):
-    """``value <= reference`` up to the rounding allowance of the decrease test: a fit that
-    starts at its optimum (a coarse fit's estimate) ends at the same value, which a long
-    record's sum gives a few 1e-16 relative higher or lower in another evaluation."""
-    return value <= reference + _ROUNDING * (1.0 + jnp.abs(reference))
 #: largest step in log parameters (a factor e^2 ~ 7.4) per Newton iteration
 MAX_LOG_STEP = 2.0
 _FTOL = 1e-13  # relative Newton decrement that counts as converged (boundary optima)
@@ -47,6 +40,13 @@ _BACKTRACK = 0.25
 _MIN_STEP = 1e-12
 #: smallest positive curvature (relative to the largest) the Newton step divides by
 _CURV_MIN = 1e-30
+
+
+def not_above(value, reference):
+    """``value <= reference`` up to the rounding allowance of the decrease test: a fit that
+    starts at its optimum (a coarse fit's estimate) ends at the same value, which a long
+    record's sum gives a few 1e-15 relative higher or lower in another evaluation."""
+    return value <= reference + _ROUNDING * (1.0 + jnp.abs(reference))
 
 
 # ------------------------------------------------------------------------------------------
