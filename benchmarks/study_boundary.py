@@ -41,6 +41,8 @@ EPS2 = (2e-9) ** 2
 K = 5e-5
 TRUE = {"k": K, "gamma": GAMMA, "tracking_var": EPS2}
 NAMES = ("k", "gamma", "tracking_var")
+#: the per-dataset rows of a run (``run``; ``run_batched`` leaves out the timings)
+_ROWS = ("val", "err", "lo", "hi", "profiled", "bound", "unc", "t_fit", "t_int", "ok")
 REGIMES = {"whittle": (65536, {"method": "likelihood"}),
            "exact": (4096, {"method": "likelihood", "likelihood": "exact"})}
 
@@ -123,8 +125,7 @@ def run(regime, n, out, seed, every=25, wald_only=False):
     n_frames, kw = REGIMES[regime]
     sampler = CirculantSampler(autocovariance(K, GAMMA, W, DT, EPS2, n_frames))
     rng = np.random.default_rng(seed)
-    rows = {key: [] for key in ("val", "err", "lo", "hi", "profiled", "bound", "unc",
-                                "t_fit", "t_int", "ok")}
+    rows = {key: [] for key in _ROWS}
     t_start = time.time()
     done = 0
     while done < n:
@@ -303,9 +304,6 @@ def compare(before, after):
                   f"{sd / np.mean(err):.3f} |")
     print(f"\nMC SE of a 95 % coverage: {100 * math.sqrt(0.95 * 0.05 / n):.1f} points "
           f"(all), {100 * math.sqrt(0.95 * 0.05 / max(nb, 1)):.1f} (at bound).")
-
-
-_ROWS = ("val", "err", "lo", "hi", "profiled", "bound", "unc", "t_fit", "t_int", "ok")
 
 
 def merge(out, paths):

@@ -43,9 +43,10 @@ _CURV_MIN = 1e-30
 
 
 def not_above(value, reference):
-    """``value <= reference`` up to the rounding allowance of the decrease test: a fit that
-    starts at its optimum (a coarse fit's estimate) ends at the same value, which a long
-    record's sum gives a few 1e-15 relative higher or lower in another evaluation."""
+    """``value <= reference`` up to the rounding allowance :data:`_ROUNDING` (relative): the
+    one rule of each Newton step's decrease test and of a fit's end value against its start
+    (a fit started at its optimum by a coarse fit ends at the same value, which a long
+    record's sum gives a few 1e-15 relative higher or lower in another evaluation)."""
     return value <= reference + _ROUNDING * (1.0 + jnp.abs(reference))
 
 
@@ -245,8 +246,8 @@ class SafeguardedNewton(optx.AbstractMinimiser):
         """The state after evaluating value ``vt``, gradient ``gt`` and Hessian ``ht`` at the
         trial point ``t`` (:meth:`trial`): accepted or backtracked; ``.x`` is the new ``y``."""
         first = state.n_steps < 0
-        decrease = vt - state.value <= (-_ARMIJO * state.lam * jnp.dot(state.grad, state.step)
-                                        + _ROUNDING * (1.0 + jnp.abs(state.value)))
+        decrease = not_above(vt + _ARMIJO * state.lam * jnp.dot(state.grad, state.step),
+                             state.value)
         accept = first | (jnp.isfinite(vt) & jnp.all(jnp.isfinite(gt)) & decrease)
         dxt, pd, psd = newton_direction(gt, ht)
         done_t, a = self._converged(t, vt, gt, dxt, pd, psd, state.size_prev)
