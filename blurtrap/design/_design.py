@@ -38,6 +38,10 @@ _EXACT_FRICTION_SE = 1e-12
 UNIDENTIFIED_SE = 1.0
 #: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
 PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
+#: exposure slots and stiffnesses of the optimiser's program: series of up to 3 exposures
+#: and a single stiffness or a range (3 values) share one compilation
+N_SLOTS = 3
+N_KS = 3
 
 
 def _with_friction_prior(infos, friction_se):
@@ -100,9 +104,12 @@ def _objective(infos, target, friction_se):
 
 
 class _Problem(eqx.Module):
-    """`n_exp` recordings at a common frame interval (at the relative laser powers
-    ``powers``), as a function of unconstrained
-    coordinates ``u = (log(dt/dt_min - 1), logit of each exposure in [w_min, dt - dead])``."""
+    """Recordings at a common frame interval (at the relative laser powers ``powers``), as a
+    function of unconstrained coordinates ``u = (log(dt/dt_min - 1), logit of each exposure
+    in [w_min, dt - dead])``. The program has ``n_slots`` exposure slots whatever the
+    series' length (one compilation for series of 1, 2 and 3 exposures): a slot that is not
+    ``active`` is a recording of one frame, whose Whittle information ((N - 1) times the
+    mean) is exactly zero, so its coordinate has no gradient and stays where it starts."""
 
     dt_min: jax.Array
     w_min: jax.Array
@@ -114,10 +121,11 @@ class _Problem(eqx.Module):
     eps_ref2: jax.Array
     w_ref: jax.Array
     friction_se: jax.Array  # < 0: friction fitted; >= 0: known to this relative SE
-    powers: jax.Array  # (n_exp,) laser power of each recording / the power k is given at
-    n_exp: int = eqx.field(static=True)
-    total_time: bool = eqx.field(static=True)
-    photon_limited: bool = eqx.field(static=True)
+    powers: jax.Array  # (n_slots,) laser power of each recording / the power k is given at
+    active: jax.Array  # (n_slots,) bool: the slot is one of the series' recordings
+    total_time: jax.Array  # bool: ``budget`` is the total time (else frames per recording)
+    photon_limited: jax.Array  # bool: eps^2 = eps_ref^2 w_ref / W
+    n_slots: int = eqx.field(static=True)
     target: str = eqx.field(static=True)
     noise: bool = eqx.field(static=True, default=True)  # log eps^2 is a parameter
 
@@ -125,8 +133,10 @@ class _Problem(eqx.Module):
         u = jnp.clip(u, -30.0, 30.0)
         dt = self.dt_min * (1.0 + jnp.exp(u[0]))
         ws = self.w_min + jax.nn.sigmoid(u[1:]) * (dt - self.dead - self.w_min)
-        n = self.budget / dt / self.n_exp if self.total_time else self.budget
-        return [(dt, ws[i], n, self.powers[i]) for i in range(self.n_exp)]
+        n_rec = jnp.sum(self.active)
+        n = jnp.where(self.total_time, self.budget / dt / n_rec, self.budget)
+        ns = jnp.where(self.active, n, 1.0)
+        return [(dt, ws[i], ns[i], self.powers[i]) for i in range(self.n_slots)]
 
 
 def _log_objective(u, prob: _Problem):
@@ -172,7 +182,13 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
     powers = tuple(r[3] for r in recs) if recs and all(len(r) == 4 for r in recs) else None
     infos = candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref,
                                    photon_limited, eps_ref2 > 0)
-    se, free_se, fs, obj, crb, p_bound = _evaluate_jit(infos, friction_se, target=target)
+    n_k = len(ks)
+    # one program for a single stiffness and a range of three: the last one repeated (the
+    # objective is the worst case over them)
+    padded = np.concatenate([infos, np.repeat(infos[-1:], max(0, N_KS - n_k), axis=0)])
+    se, free_se, fs, obj, crb, p_bound = (
+        np.asarray(a)[:n_k] if i != 3 else a
+        for i, a in enumerate(_evaluate_jit(padded, friction_se, target=target)))
     se, free_se, fs, obj = np.asarray(se), np.asarray(free_se), np.asarray(fs), float(obj)
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
     predicted = {n: se[:, i] for i, n in enumerate(names)}
@@ -207,19 +223,26 @@ def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time
     (relative to the one k is given at; a power series with one exposure per power); the
     program compiled is the same as the exposure series' (there: powers 1)."""
     ks, gamma, temperature, eps_ref2, w_ref, photon_limited, target, friction_se = common
+    n_slots = max(N_SLOTS, n_exp)
+    pw = np.ones(n_slots)
+    pw[:n_exp] = 1.0 if powers is None else np.asarray(powers, dtype=float)
+    ks_arr = np.atleast_1d(np.asarray(ks, dtype=float))
+    # the objective is the worst case over the stiffnesses: a single one repeated is the same
+    # objective, and the program the same as for a range of three
+    ks_arr = np.concatenate([ks_arr, np.repeat(ks_arr[-1:], max(0, N_KS - ks_arr.size))])
     prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
                     dead=jnp.asarray(dead_time),
                     budget=jnp.asarray(budget),
-                    ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
+                    ks=jnp.asarray(ks_arr), gamma=jnp.asarray(gamma),
                     temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
                     w_ref=jnp.asarray(w_ref), friction_se=jnp.asarray(friction_se),
-                    powers=jnp.asarray(np.ones(n_exp) if powers is None else powers,
-                                       dtype=float),
-                    n_exp=n_exp,
-                    total_time=by_time, photon_limited=photon_limited,
+                    powers=jnp.asarray(pw), active=jnp.asarray(np.arange(n_slots) < n_exp),
+                    n_slots=n_slots, total_time=jnp.asarray(bool(by_time)),
+                    photon_limited=jnp.asarray(bool(photon_limited)),
                     target=target, noise=eps_ref2 > 0)
     spread = np.linspace(-2.0, 2.0, n_exp) if n_exp > 1 else np.zeros(1)
-    starts = np.array([np.concatenate([[u0], spread + s0]) for u0 in (-6.0, 0.0, 2.0)
+    idle = np.zeros(n_slots - n_exp)
+    starts = np.array([np.concatenate([[u0], spread + s0, idle]) for u0 in (-6.0, 0.0, 2.0)
                        for s0 in (-2.0, 2.0)])
     us, vals = _minimise_all(prob, jnp.asarray(starts))
     vals = np.asarray(vals)
@@ -229,7 +252,7 @@ def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time
     if label is None:
         label = "optimised single recording" if n_exp == 1 else \
             f"optimised series of {n_exp} exposures"
-    recs = prob.recs(best_u)
+    recs = prob.recs(best_u)[:n_exp]
     return _acquisition(label, recs if powers is not None else [r[:3] for r in recs], *common)
 
 

@@ -15,6 +15,8 @@ noise), so ``sqrt(inv(F))_ii`` is the relative standard error of each.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -113,7 +115,7 @@ def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
 
     def info(k):
         def one(dt, w, n, p):
-            e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
+            e2 = eps_ref2 * jnp.where(photon_limited, w_ref / w, 1.0)  # (traced in the optimiser)
             return whittle_information(k * p, gamma, w, dt, n, temperature, e2, noise=noise)
 
         return jnp.sum(jax.vmap(one)(dts, ws, ns, ps), axis=0)
@@ -126,8 +128,25 @@ def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
 #: at 512 frames and 0.4 % at 128: tests/design)
 EXACT_MAX_FRAMES = 512
 
-_informations_jit = jax.jit(_informations, static_argnums=(6, 7))
 _exact_jit = jax.jit(exact_information, static_argnames=("n_frames", "noise"))
+#: the candidates' Whittle information is compiled for recordings and stiffnesses padded to
+#: these multiples (a padded recording has one frame: zero information), so that every
+#: candidate of a design call, and of the next call, runs the same program
+_REC_PAD = 4
+_K_PAD = 3
+
+
+@functools.partial(jax.jit, static_argnums=(9,))
+def _informations_padded(dts, ws, ns, ps, ks, gamma, temperature, eps_ref2, w_ref, noise,
+                         photon_limited):
+    recs = [(dts[i], ws[i], ns[i], ps[i]) for i in range(dts.shape[0])]
+    return _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
+
+
+def _padded(values, multiple, fill):
+    a = np.asarray(values, dtype=float)
+    m = -(-max(a.size, 1) // multiple) * multiple
+    return np.concatenate([a, np.full(m - a.size, fill if fill is not None else a[-1])])
 
 
 def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
@@ -137,9 +156,16 @@ def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon
     short = [r for r in recs if int(round(r[2])) <= EXACT_MAX_FRAMES]
     long = tuple(r for r in recs if int(round(r[2])) > EXACT_MAX_FRAMES)
     n_par = 3 if noise else 2
-    infos = (np.array(_informations_jit(long, ks, gamma, temperature, eps_ref2, w_ref,
-                                        photon_limited, noise)) if long
-             else np.zeros((len(ks), n_par, n_par)))
+    if long:
+        cols = [[float(r[i]) for r in long] for i in range(3)]
+        ps = [float(r[3]) if len(r) > 3 else 1.0 for r in long]
+        dts, ws = _padded(cols[0], _REC_PAD, None), _padded(cols[1], _REC_PAD, None)
+        ns, ps = _padded(cols[2], _REC_PAD, 1.0), _padded(ps, _REC_PAD, 1.0)
+        infos = np.array(_informations_padded(dts, ws, ns, ps, _padded(ks, _K_PAD, None),
+                                              gamma, temperature, eps_ref2, w_ref, noise,
+                                              bool(photon_limited)))[: len(ks)]
+    else:
+        infos = np.zeros((len(ks), n_par, n_par))
     for r in short:
         dt, w, p = r[0], r[1], (r[3] if len(r) > 3 else 1.0)
         e2 = eps_ref2 * (w_ref / w if photon_limited else 1.0)
