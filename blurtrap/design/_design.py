@@ -38,9 +38,11 @@ _EXACT_FRICTION_SE = 1e-12
 UNIDENTIFIED_SE = 1.0
 #: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
 PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
-#: exposure slots and stiffnesses of the optimiser's program: series of up to 3 exposures
-#: and a single stiffness or a range (3 values) share one compilation
+#: exposure slots of the optimiser's program: series of up to 3 exposures share one
+#: compilation (a single stiffness and a range of three are two programs: padding the
+#: stiffnesses would triple every evaluation of a single-stiffness design)
 N_SLOTS = 3
+#: stiffnesses of the candidates' evaluation (cheap: once per candidate, not per step)
 N_KS = 3
 
 
@@ -226,14 +228,10 @@ def _optimised(n_exp: int, common: tuple, dt_min: float, w_min: float, dead_time
     n_slots = max(N_SLOTS, n_exp)
     pw = np.ones(n_slots)
     pw[:n_exp] = 1.0 if powers is None else np.asarray(powers, dtype=float)
-    ks_arr = np.atleast_1d(np.asarray(ks, dtype=float))
-    # the objective is the worst case over the stiffnesses: a single one repeated is the same
-    # objective, and the program the same as for a range of three
-    ks_arr = np.concatenate([ks_arr, np.repeat(ks_arr[-1:], max(0, N_KS - ks_arr.size))])
     prob = _Problem(dt_min=jnp.asarray(dt_min), w_min=jnp.asarray(w_min),
                     dead=jnp.asarray(dead_time),
                     budget=jnp.asarray(budget),
-                    ks=jnp.asarray(ks_arr), gamma=jnp.asarray(gamma),
+                    ks=jnp.asarray(ks), gamma=jnp.asarray(gamma),
                     temperature=jnp.asarray(temperature), eps_ref2=jnp.asarray(eps_ref2),
                     w_ref=jnp.asarray(w_ref), friction_se=jnp.asarray(friction_se),
                     powers=jnp.asarray(pw), active=jnp.asarray(np.arange(n_slots) < n_exp),

@@ -191,16 +191,20 @@ def test_diagnose_record_in_a_new_bucket_compiles_no_screening_fit(compiles, mon
 
 
 def test_design_compiles_its_optimiser_once_for_every_series_and_budget(compiles):
-    """bt.design's optimiser is one program for exposure series of 1 to 3 recordings, a
-    single stiffness or a range, frames per recording or a total time, and photon-limited
-    noise or not (before: one per series length and budget kind, 6-7 s of compilation and
-    ~10 s of tracing each; a second design call with a k range took 33 s)."""
+    """bt.design's optimiser is one program for exposure series of 1 to 3 recordings, frames
+    per recording or a total time, and photon-limited noise or not; the candidates'
+    evaluation one program for a single stiffness or a range (before: one optimiser per
+    series length and budget kind, 6-7 s of compilation and ~10 s of tracing each)."""
     common = {"radius": 1.53e-6, "max_fps": 1500.0, "tracking_std": 2e-9}
     bt.design(k=5e-5, total_time=60.0, series=(1,), **common)
     compiles.reset()
-    res = bt.design(k=(2e-5, 2e-4), n_frames=65536, series=(1, 2, 3), photon_limited=True,
+    res = bt.design(k=1e-4, n_frames=65536, series=(1, 2, 3), photon_limited=True,
                     laser_powers=(0.5, 1.0), **common)
     assert [c for c in res.candidates if c.label.startswith("optimised series of 3")]
     again = [n for n in compiles.names if n.startswith(
         ("jit(_minimise_all", "jit(_informations", "jit(_evaluate"))]
     assert again == []
+    bt.design(k=(2e-5, 2e-4), n_frames=65536, series=(1,), **common)
+    compiles.reset()
+    bt.design(k=(5e-5, 5e-4), total_time=30.0, series=(2, 3), **common)
+    assert [n for n in compiles.names if n.startswith(("jit(_minimise_all", "jit(_evaluate"))] == []
