@@ -27,7 +27,7 @@ from ..physics import BOLTZMANN
 from ._bounds import bound_probability, bounded_covariance
 from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
 from ._checks import _check, _checked_friction, _checked_noise, checked_trap
-from ._fisher import _informations, candidate_informations
+from ._fisher import K_PAD, _informations, candidate_informations, padded
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
 
@@ -42,8 +42,6 @@ PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
 #: compilation (a single stiffness and a range of three are two programs: padding the
 #: stiffnesses would triple every evaluation of a single-stiffness design)
 N_SLOTS = 3
-#: stiffnesses of the candidates' evaluation (cheap: once per candidate, not per step)
-N_KS = 3
 
 
 def _with_friction_prior(infos, friction_se):
@@ -185,13 +183,10 @@ def _acquisition(label, recs, ks, gamma, temperature, eps_ref2, w_ref, photon_li
     infos = candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref,
                                    photon_limited, eps_ref2 > 0)
     n_k = len(ks)
-    # one program for a single stiffness and a range of three: the last one repeated (the
-    # objective is the worst case over them)
-    padded = np.concatenate([infos, np.repeat(infos[-1:], max(0, N_KS - n_k), axis=0)])
-    se, free_se, fs, obj, crb, p_bound = (
-        np.asarray(a)[:n_k] if i != 3 else a
-        for i, a in enumerate(_evaluate_jit(padded, friction_se, target=target)))
-    se, free_se, fs, obj = np.asarray(se), np.asarray(free_se), np.asarray(fs), float(obj)
+    # stiffnesses padded as the information's (one program for a single one and a range)
+    out = _evaluate_jit(padded(infos, K_PAD), friction_se, target=target)
+    se, free_se, fs, crb, p_bound = (np.asarray(out[i])[:n_k] for i in (0, 1, 2, 4, 5))
+    obj = float(out[3])
     names = ("k", "gamma", "tracking_var")[: se.shape[1]]
     predicted = {n: se[:, i] for i, n in enumerate(names)}
     known = friction_se >= 0

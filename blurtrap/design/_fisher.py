@@ -15,8 +15,6 @@ noise), so ``sqrt(inv(F))_ii`` is the relative standard error of each.
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -112,10 +110,18 @@ def _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
     k_i = k p (k = c P), and log k_i = log c + log p, so the first row is that of log c."""
     dts, ws, ns = (jnp.stack([jnp.asarray(r[i], dtype=float) for r in recs]) for i in range(3))
     ps = jnp.stack([jnp.asarray(r[3] if len(r) > 3 else 1.0, dtype=float) for r in recs])
+    return _informations_of(dts, ws, ns, ps, ks, gamma, temperature, eps_ref2, w_ref,
+                            photon_limited, noise)
+
+
+def _informations_of(dts, ws, ns, ps, ks, gamma, temperature, eps_ref2, w_ref,
+                     photon_limited, noise):
+    """:func:`_informations` of recordings given as arrays (frame intervals, exposures,
+    frames, relative powers); ``photon_limited`` may be traced."""
 
     def info(k):
         def one(dt, w, n, p):
-            e2 = eps_ref2 * jnp.where(photon_limited, w_ref / w, 1.0)  # (traced in the optimiser)
+            e2 = eps_ref2 * jnp.where(photon_limited, w_ref / w, 1.0)
             return whittle_information(k * p, gamma, w, dt, n, temperature, e2, noise=noise)
 
         return jnp.sum(jax.vmap(one)(dts, ws, ns, ps), axis=0)
@@ -130,23 +136,22 @@ EXACT_MAX_FRAMES = 512
 
 _exact_jit = jax.jit(exact_information, static_argnames=("n_frames", "noise"))
 #: the candidates' Whittle information is compiled for recordings and stiffnesses padded to
-#: these multiples (a padded recording has one frame: zero information), so that every
-#: candidate of a design call, and of the next call, runs the same program
-_REC_PAD = 4
-_K_PAD = 3
+#: these multiples (a padded recording has one frame: zero information; a padded stiffness
+#: repeats the last, which leaves a worst case over them unchanged), so that every candidate
+#: of a design call, and of the next call, runs the same program
+REC_PAD = 4
+K_PAD = 3
+_informations_padded = jax.jit(_informations_of, static_argnums=(10,))
 
 
-@functools.partial(jax.jit, static_argnums=(9,))
-def _informations_padded(dts, ws, ns, ps, ks, gamma, temperature, eps_ref2, w_ref, noise,
-                         photon_limited):
-    recs = [(dts[i], ws[i], ns[i], ps[i]) for i in range(dts.shape[0])]
-    return _informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited, noise)
-
-
-def _padded(values, multiple, fill):
-    a = np.asarray(values, dtype=float)
-    m = -(-max(a.size, 1) // multiple) * multiple
-    return np.concatenate([a, np.full(m - a.size, fill if fill is not None else a[-1])])
+def padded(a, multiple, fill=None):
+    """``a`` along its first axis, padded to a multiple of ``multiple`` rows with ``fill``
+    (None: copies of the last row)."""
+    a = np.asarray(a, dtype=float)
+    extra = -(-max(len(a), 1) // multiple) * multiple - len(a)
+    pad = np.repeat(a[-1:], extra, axis=0) if fill is None else np.full((extra,) + a.shape[1:],
+                                                                         fill)
+    return np.concatenate([a, pad])
 
 
 def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon_limited,
@@ -157,13 +162,12 @@ def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon
     long = tuple(r for r in recs if int(round(r[2])) > EXACT_MAX_FRAMES)
     n_par = 3 if noise else 2
     if long:
-        cols = [[float(r[i]) for r in long] for i in range(3)]
-        ps = [float(r[3]) if len(r) > 3 else 1.0 for r in long]
-        dts, ws = _padded(cols[0], _REC_PAD, None), _padded(cols[1], _REC_PAD, None)
-        ns, ps = _padded(cols[2], _REC_PAD, 1.0), _padded(ps, _REC_PAD, 1.0)
-        infos = np.array(_informations_padded(dts, ws, ns, ps, _padded(ks, _K_PAD, None),
-                                              gamma, temperature, eps_ref2, w_ref, noise,
-                                              bool(photon_limited)))[: len(ks)]
+        dts, ws, ns = (padded([r[i] for r in long], REC_PAD) for i in range(3))
+        ns[len(long):] = 1.0
+        ps = padded([r[3] if len(r) > 3 else 1.0 for r in long], REC_PAD, 1.0)
+        infos = np.array(_informations_padded(dts, ws, ns, ps, padded(ks, K_PAD), gamma,
+                                              temperature, eps_ref2, w_ref,
+                                              bool(photon_limited), noise))[: len(ks)]
     else:
         infos = np.zeros((len(ks), n_par, n_par))
     for r in short:
