@@ -106,7 +106,7 @@ def calibrate_batch(
 
     - the checks of a ``Recording``: NaN/inf frames (``"invalid: NaN at frame 17"``), a
       constant trace (``"constant trace"``) and, with ``check_units`` (default), positions
-      whose standard deviation exceeds 1 mm (``"invalid: positions look like nm ..."``);
+      whose standard deviation exceeds 10 um (``"invalid: positions look like nm ..."``);
       frame interval or exposure above 1 s or a temperature below 100 K concern every row
       and raise ``ValueError``;
     - the refusal of frames without temporal information (lag-1 correlation below 5
