@@ -162,8 +162,8 @@ def candidate_informations(recs, ks, gamma, temperature, eps_ref2, w_ref, photon
     long = tuple(r for r in recs if int(round(r[2])) > EXACT_MAX_FRAMES)
     n_par = 3 if noise else 2
     if long:
-        dts, ws, ns = (padded([r[i] for r in long], REC_PAD) for i in range(3))
-        ns[len(long):] = 1.0
+        dts, ws = (padded([r[i] for r in long], REC_PAD) for i in range(2))
+        ns = padded([r[2] for r in long], REC_PAD, 1.0)
         ps = padded([r[3] if len(r) > 3 else 1.0 for r in long], REC_PAD, 1.0)
         infos = np.array(_informations_padded(dts, ws, ns, ps, padded(ks, K_PAD), gamma,
                                               temperature, eps_ref2, w_ref,
