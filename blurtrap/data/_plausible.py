@@ -67,9 +67,12 @@ _MAX_PLAUSIBLE_STAGE_STD_M = 1e-4
 
 def in_ms_message(name: str, value: float) -> str:
     rate = "" if name != "frame_interval" else f", {1e3 / value:.6g} frames/s"
+    frames = (" - or, with a time column counting 0, 1, 2, ..., frame numbers rather than "
+              "times: then give frame_interval [s] explicitly"
+              if name == "frame_interval" and value == 1.0 else "")
     return (
         f"{name} = {value!r} s is at least {_g(_MAX_PLAUSIBLE_INTERVAL_S)} s (10 frames/s or "
-        f"slower): this looks like ms, not s (did you mean {value * 1e-3!r} s{rate}?). "
+        f"slower): this looks like ms, not s (did you mean {value * 1e-3!r} s{rate}?{frames}). "
         f"Expected seconds, below {_g(_MAX_PLAUSIBLE_INTERVAL_S)} s; if the acquisition really "
         "is this slow, pass check_units=False"
     )

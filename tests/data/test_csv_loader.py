@@ -143,6 +143,9 @@ def test_trailing_blank_lines_are_not_data(tmp_path):
         ("time,x_nm\n0,1\n", r"rec.csv, line 1: header 'time,x_nm' has columns"),
         ("t_s,x_nm,y_nm\n0,1,1\n", r"rec.csv, line 1: header .* has columns"),
         ("t_s,pos\n0,1\n", r"rec.csv, line 1: position column 'pos' not understood"),
+        ("t_s;x_nm\n0;1\n", r"rec.csv, line 1: header 't_s;x_nm' separates its columns with "
+         r"semicolons; .* uses commas"),
+        ("t_s\tx_nm\n0\t1\n", r"rec.csv, line 1: header .* separates its columns with tabs"),
         (
             "t_s,x_nm\n0,1\n0.001,abc\n0.002,3\n",
             r"rec.csv, line 3: non-numeric value 'abc' in column x_nm",
@@ -286,6 +289,14 @@ def test_time_column_in_ms_is_caught(tmp_path, fps):
         load_csv(p, exposure=1e-4, frame_interval=1 / fps)
     r = load_csv(p, exposure=1e-4, check_units=False)
     assert r.frame_interval == pytest.approx(1e3 / fps, rel=1e-9)
+
+
+def test_frame_numbers_in_the_time_column_are_named(tmp_path):
+    x = np.random.default_rng(1).normal(0, 20.0, 50)
+    text = "t_s,x_nm\n" + "".join(f"{i},{v!r}\n" for i, v in enumerate(x.tolist()))
+    with pytest.raises(ValueError, match=r"frame numbers rather than times: then give "
+                       r"frame_interval"):
+        load_csv(write(tmp_path, text), exposure=1e-4)
 
 
 @pytest.mark.parametrize("unit", ["m", "mm", "um", "nm"])
