@@ -53,9 +53,11 @@ def calibrate_command(args) -> int:
     if args.fix:
         kw["fixed"] = _fixed_arg(args.fix)
     if args.diffusion is not None:  # calibrate checks that the method uses it
-        if not (0 < args.diffusion <= 1e4):
-            raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.4 um^2/s) and must "
-                           f"be > 0 and plausible (<= 1e4); got {args.diffusion:g}")
+        if not (1e-7 <= args.diffusion <= 1e4):
+            raise CliError(f"--diffusion is in um^2/s (a 1 um bead in water: ~0.2 um^2/s) and "
+                           f"must be plausible, 1e-7..1e4 um^2/s; got {args.diffusion:g}"
+                           + (" (this looks like m^2/s: 1e-13 m^2/s = 0.1 um^2/s)"
+                              if 0 < args.diffusion < 1e-7 else ""))
         kw["diffusion"] = args.diffusion * 1e-12
     if xy:
         return _calibrate_xy(path, kw, args.json)

@@ -35,7 +35,12 @@ import numpy as np
 
 from .._config import float64_scope
 from ..inference import FitError, calibrate, get_model
-from ..inference.internal import as_recordings, chi2_sf, default_model
+from ..inference.internal import (
+    as_recordings,
+    chi2_sf,
+    default_model,
+    refuse_without_temporal_information,
+)
 from ..inference.internal import inspect_frames as _inspect_frames
 from ._candidates import _check_alpha, _check_candidates, default_candidates, try_candidates
 from ._detector import detector_note
@@ -208,7 +213,9 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     **Returns:** :class:`Diagnosis` (``adequate``, ``gof``, ``ranking`` best first).
 
     **Raises:** ``ValueError`` for an ``alpha`` outside (0, 1), an unknown candidate name,
-    or saturated or coarsely quantised frames (checked before any fit).
+    or saturated or coarsely quantised frames (checked before any fit); ``FitError`` when
+    the frames carry no temporal information and fewer than 3 exposures or laser powers
+    identify gamma (as ``calibrate``).
     """
     alpha = _check_alpha(alpha)
     candidates = _check_candidates(candidates)
@@ -216,6 +223,10 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     # saturated or coarsely quantised frames: refused here as by calibrate (the base fit
     # runs with strict=False, which would only note them)
     _inspect_frames(recs, strict=True)
+    # frames without temporal information (white noise, dt >> tau) cannot identify gamma
+    # from one exposure: refused here as by calibrate (the base fit would call the
+    # unidentifiable model adequate)
+    refuse_without_temporal_information(recs)
     settings = _common_settings(recs)
     mdl = get_model(model) if model is not None else default_model(settings)
     if add:

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import chi2_sf
-from ._frames import temporal_information
+from ._frames import _quantisation, _saturation, temporal_information
 
 # The unit-slip thresholds of ``Recording`` (blurtrap/data/_recording.py; a test holds them
 # equal): a batch row is checked like a Recording built from it.
@@ -70,6 +70,34 @@ def row_stats(rows: np.ndarray) -> np.ndarray:
         out[:, 4] = np.sqrt(c0)
         out[:, 5] = np.where(c0 > 0, c1 / np.where(c0 > 0, c0, 1.0) * math.sqrt(n), 0.0)
     out[nbad > 0, 4:] = np.nan
+    return out
+
+
+def frame_status(rows: np.ndarray, first: int = 0) -> np.ndarray:
+    """Per row of ``rows`` (R, N): ``""``, or the refusal ``calibrate`` gives its frames
+    (saturated/clipped, or quantised in steps above their standard deviation; see
+    :func:`blurtrap.inference._frames._inspect_frames`). A vectorised screen (a pile-up of
+    >= 3 frames at the extreme values, or at most N/2 distinct values) picks the few rows
+    that get the full checks; ``first`` numbers the rows in the messages."""
+    out = np.full(rows.shape[0], "", dtype=object)
+    n = rows.shape[1]
+    with np.errstate(all="ignore"):
+        srt = np.sort(rows, axis=1)
+        at_min = np.sum(srt == srt[:, :1], axis=1)
+        at_max = np.sum(srt == srt[:, -1:], axis=1)
+        distinct = 1 + np.sum(np.diff(srt, axis=1) > 0, axis=1)
+        finite = np.all(np.isfinite(srt[:, [0, -1]]), axis=1)
+    cand = finite & ((at_min >= 3) | (at_max >= 3) | (distinct <= n // 2))
+    for i in np.flatnonzero(cand):
+        y = rows[i]
+        u, counts = np.unique(y, return_counts=True)
+        if u.size < 2:
+            continue
+        for check in (_saturation, _quantisation):
+            msg, refused = check(y, u, counts, f"item {first + i}")
+            if refused:
+                out[i] = "refused: " + msg
+                break
     return out
 
 

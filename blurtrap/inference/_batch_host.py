@@ -59,28 +59,32 @@ _HOST_ROWS = 16
 def _periodograms(y, n_blocks, m, dt):
     """Block-averaged periodograms (B, M//2) of every row: mean removed per block, ordinates
     j = 1..M/2, ``dt/M |FFT|^2`` averaged over the blocks; with the lag moments of
-    :func:`_lag_moments` (3, B), the mean ordinate (B,) and the per-row checks of
-    :func:`_batch_checks.row_stats` (B, 6), all taken while a block of rows is at hand."""
+    :func:`_lag_moments` (3, B), the mean ordinate (B,), the per-row checks of
+    :func:`_batch_checks.row_stats` (B, 6) and the frame refusals of
+    :func:`_batch_checks.frame_status` (B,), all taken while a block of rows is at hand."""
     out = np.empty((y.shape[0], m // 2))
     mom = np.empty((3, y.shape[0]))
     avg = np.empty(y.shape[0])
     stats = np.empty((y.shape[0], 6))
+    frames = np.full(y.shape[0], "", dtype=object)
     for i in range(0, y.shape[0], _HOST_ROWS):
         stats[i:i + _HOST_ROWS] = checks.row_stats(y[i:i + _HOST_ROWS])
+        frames[i:i + _HOST_ROWS] = checks.frame_status(y[i:i + _HOST_ROWS], i)
         with np.errstate(all="ignore"):  # rows with NaN/inf are replaced in _prepare
             rows = out[i:i + _HOST_ROWS]
             rows[:] = _np_periodogram(y[i:i + _HOST_ROWS, : m * n_blocks], dt, n_blocks)[1]
             mom[:, i:i + _HOST_ROWS] = _lag_moments(rows, m, dt)
             avg[i:i + _HOST_ROWS] = rows.mean(axis=1)
-    return out, mom, avg, stats
+    return out, mom, avg, stats, frames
 
 
 def _prepare(y, n_blocks, m, dt, w, temp, noise, check_units):
     """Host-side inputs of the fit for rows ``y``: periodograms (B, M//2), start values, log
     reference levels, the per-row checks (B, 6) and the status of rows that are not fitted
     (``""`` for the others). Rows not fitted get a stand-in spectrum (not reported)."""
-    power, mom, avg, stats = _periodograms(y, n_blocks, m, dt)
+    power, mom, avg, stats, frames = _periodograms(y, n_blocks, m, dt)
     pre = checks.prefit_status(stats, check_units)
+    pre = np.where((pre == "") & (frames != ""), frames, pre)  # after the Recording checks
     skip = pre != ""
     if skip.any():  # harmless stand-in data for the vmapped fit only
         power[skip] = power[~skip].mean(axis=0) if (~skip).any() else 1e-20

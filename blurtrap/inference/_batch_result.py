@@ -29,7 +29,9 @@ class BatchCalibration:
     #: bead diffuses almost freely and k is not identified), "constant trace" (no
     #: fluctuations; values NaN), or, with values and errors NaN, "invalid: ..." (NaN/inf
     #: frames, positions not in metres), "refused: ..." (dt >> tau or tracking noise swamps
-    #: the motion: gamma not identifiable) or "inadequate: goodness of fit p = ..." (the model
+    #: the motion: gamma not identifiable; a saturated (clipped) detector, or positions
+    #: quantised in steps above their std: calibrate's refusals of such frames) or
+    #: "inadequate: goodness of fit p = ..." (the model
     #: does not describe the spectrum, e.g. a line or drift)
     status: np.ndarray
     method: str

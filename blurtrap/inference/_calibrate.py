@@ -22,7 +22,7 @@ from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_in
 from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
 from ._problems import make_layout
-from ._recordings import _bead_radii, _stokes_notes, as_recordings
+from ._recordings import _bead_radii, _plausibility_notes, _stokes_notes, as_recordings
 from ._refusals import _check_psd_blocks, _no_temporal_information_message
 from ._result import CalibrationResult, FitError
 from ._starts import moment_start
@@ -73,7 +73,8 @@ def calibrate(
       (Whittle above 2^14 frames per recording, where the two agree to well within errors).
     - `n_blocks`: blocks for ``method="psd"`` (default: 128 blocks, at least 64 frames each).
     - `f_range`: ``(f_min, f_max)`` [Hz] fitted in the spectral methods.
-    - `diffusion`, `pade`: for blur-corrected equipartition.
+    - `diffusion`, `pade`: for blur-corrected equipartition (D in m^2/s); ``"auto"`` uses D
+      only when the frames cannot determine it, and says so in the notes otherwise.
     - `start`: optional start values by parameter name (SI), e.g. from a previous fit
       (``result.params``); missing names use the closed-form starts.
     - `strict`: raise ``FitError`` when the Fisher information is singular (default); with
@@ -84,6 +85,10 @@ def calibrate(
       and a few saturated frames are noted in ``result.notes``.
     - `fixed`: parameters held at known values, ``{"gamma": 9.1e-9}`` or with a standard
       error ``{"gamma": (9.1e-9, 0.3e-9)}`` (SI), which is propagated into the others' errors.
+      A value outside the quantity's plausible range is a ``ValueError`` (a unit slip); a
+      held value the data disagree with (a score test, p < 0.01) gets a note. With
+      ``method="equipartition"`` only ``tracking_var`` may be held: it is subtracted from
+      the frame variance.
     - `friction`: ``"stokes"`` holds gamma at ``6 pi eta R`` of the bead (the recordings'
       ``bead_radius_m``, ``viscosity_Pa_s`` or water at their temperature, Faxen's factor at
       ``distance_to_surface_m``; ``bead_radius_err_m``, ``viscosity_err_Pa_s``,
@@ -129,7 +134,7 @@ def calibrate(
     n_blocks, f_range = _check_options(recs, method, likelihood, k, n_blocks, f_range,
                                        diffusion, pade, start, strict)
     radii = _bead_radii(recs)
-    data_notes = tuple(_inspect_frames(recs, bool(strict)))
+    data_notes = tuple(_inspect_frames(recs, bool(strict), mdl.has("drift")))
     plan = prepare_instrument(recs, mdl, model is not None, method, fixed=fixed,
                               friction=friction, detector=detector,
                               anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
@@ -142,6 +147,7 @@ def calibrate(
                                                    plan.f_range, plan.excluded)
     if not plan.volts:
         data_notes += tuple(_stokes_notes(recs, radii, res))
+        data_notes += tuple(_plausibility_notes(recs, res))
     notes = tuple(plan.notes) + data_notes
     if notes:
         res = dataclasses.replace(res, notes=tuple(res.notes) + notes)
@@ -163,12 +169,16 @@ def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, p
     notes: list[str] = []
     fixed = _check_spectral_options(method, robust, fixed, excluded)
     if method == "equipartition":
-        return _equipartition(recs, diffusion, pade)
+        return _equipartition(recs, diffusion, pade, fixed.get("tracking_var"))
     if method == "auto":
         done, k = _auto_choice(recs, mdl, k, fixed, diffusion, pade, notes)
         if done is not None:
             return done
         method = "likelihood"
+        if diffusion is not None:
+            notes.append(f"auto: the given D = {diffusion * 1e12:.4g} um^2/s is not used: "
+                         "the frames determine D themselves, so the joint likelihood fits "
+                         "it (method='equipartition' uses a given D)")
     if k is None:
         k = "linear_power" if method == "variance_vs_power" else _default_k_mode(recs)
     layout = _checked_layout(recs, mdl, k, fixed, start)
@@ -197,6 +207,8 @@ def _check_spectral_options(method, robust, fixed, excluded) -> dict:
         raise ValueError(f"robust=True applies to the spectral methods (Whittle likelihood, "
                          f"psd); got method = {method!r}")
     fixed = fixed or {}
+    if method == "equipartition" and set(fixed) <= {"tracking_var"}:
+        return fixed  # the known tracking-error variance is subtracted from the variance
     if fixed and method not in ("auto", "likelihood", "psd"):
         raise ValueError(f"fixed = {sorted(fixed)} applies to the likelihood and psd methods; "
                          f"got method = {method!r}")
@@ -246,12 +258,12 @@ def _auto_choice(recs, mdl, k, fixed, diffusion, pade, notes):
         if k is None:
             k = "linear_power"
     elif diffusion is not None:
-        res = _equipartition(recs, diffusion, pade)
+        res = _equipartition(recs, diffusion, pade, fixed.get("tracking_var"))
         return dataclasses.replace(res, notes=(
             f"auto: frames carry no temporal information (lag-1 correlation only {best:.1f} "
             "standard errors above 0: dt >> tau, or tracking noise dominates) and there are "
             "fewer than 3 exposures or powers; k from blur-corrected equipartition with the "
-            "given D, assuming eps^2 = 0 (any tracking noise biases k low)",) + res.notes), k
+            "given D",) + res.notes), k
     else:
         raise FitError(_no_temporal_information_message(recs, info))
     return None, k

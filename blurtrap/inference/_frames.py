@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from ._chi2 import f_sf
 from ._variance import empirical_variance_se
 
 
@@ -76,6 +77,83 @@ def _outlier_sentence(recs, z_min=5.0) -> str:
     return ""
 
 
+#: mean-shift test: segments, the most sub-blocks per segment, the sub-block length in
+#: relaxation times (batch means need blocks much longer than the correlation time), the
+#: significance and the smallest spread of the segment means (x the frames' std) noted
+_SHIFT_SEGMENTS = 16
+_SHIFT_SUB = 8
+_SHIFT_SUB_TAU = 20.0
+_SHIFT_ALPHA = 1e-6
+_SHIFT_MIN_SPREAD = 0.25
+
+
+def mean_shift(y) -> dict | None:
+    """Whether the mean position moves across the record (a step, or a drift), by batch
+    means: the record is cut into 16 segments; each segment's own scatter of sub-block means
+    (median over segments, so that a step inside one segment does not inflate it) estimates
+    the long-run variance, hence the expected scatter of the segment means under
+    stationarity; their observed scatter gives ``chi2 = sum (m_j - m)^2 / var_j`` with 15
+    degrees of freedom, referred to an F distribution (the denominator is estimated).
+    Sub-blocks are >= 20 relaxation times long (the lag-1 correlation
+    within segments gives tau), else no test (``None``). Returns ``{"chi2", "dof", "p",
+    "spread" (max - min of the segment means), "std", "jump", "at" (the largest jump between
+    neighbouring segments and the frame where it is), "step" (one jump carries most of the
+    spread), "significant"}``."""
+    y = np.asarray(y, dtype=float)
+    n_seg = _SHIFT_SEGMENTS
+    m = y.size // n_seg
+    if m < 32:
+        return None
+    seg = y[: m * n_seg].reshape(n_seg, m)
+    seg = seg - seg.mean(axis=1, keepdims=True)
+    c0 = np.mean(seg * seg, axis=1)
+    c1 = np.mean(seg[:, 1:] * seg[:, :-1], axis=1)
+    rho = float(np.median(c1 / np.where(c0 > 0, c0, 1.0)))
+    tau = -1.0 / math.log(rho) if 0.0 < rho < 1.0 else 0.0
+    b = min(_SHIFT_SUB, int(m / (_SHIFT_SUB_TAU * max(tau, 1.0))))
+    if b < 4:
+        return None
+    ms = m // b
+    means = y[: m * n_seg].reshape(n_seg, m)[:, : ms * b].reshape(n_seg, b, ms).mean(axis=2)
+    within = np.var(means, axis=1, ddof=1)  # ~ lrv / ms x chi2_{b-1}/(b-1)
+    k = b - 1
+    med_chi2 = k * (1.0 - 2.0 / (9.0 * k)) ** 3 / k  # median of chi2_k / k (Wilson-Hilferty)
+    var_sub = float(np.median(within)) / med_chi2
+    if not var_sub > 0:
+        return None
+    seg_means = means.mean(axis=1)
+    chi2 = float(np.sum((seg_means - seg_means.mean()) ** 2) / (var_sub / b))
+    dof = n_seg - 1
+    # the denominator is itself estimated: chi2 / dof is ~F(dof, d2) with d2 the
+    # denominator's degrees of freedom, n_seg (b - 1), times ~0.64 for a median's efficiency
+    p = f_sf(chi2 / dof, dof, 0.64 * n_seg * (b - 1))
+    spread = float(seg_means.max() - seg_means.min())
+    jumps = np.abs(np.diff(seg_means))
+    j = int(np.argmax(jumps))
+    std = float(np.std(y))
+    return {"chi2": chi2, "dof": dof, "p": p, "spread": spread, "std": std,
+            "jump": float(jumps[j]), "at": (j + 1) * m, "step": bool(jumps[j] > 0.6 * spread),
+            "significant": bool(p < _SHIFT_ALPHA and spread > _SHIFT_MIN_SPREAD * std)}
+
+
+def mean_shift_sentence(recs, unit: str = "m") -> str:
+    """A sentence naming a step or drift of the mean position ('' when there is none)."""
+    for i, r in enumerate(recs):
+        t = mean_shift(r.positions)
+        if t is None or not t["significant"]:
+            continue
+        kind = (f"a step: the mean jumps by {t['jump']:.3g} {unit} near frame {t['at']}"
+                if t["step"] else "a drift")
+        return (f"the mean position of recording {i} is not stationary ({kind}): the means of "
+                f"{t['dof'] + 1} segments spread over {t['spread']:.3g} {unit} "
+                f"({t['spread'] / t['std']:.2g} x the frames' std), far beyond their expected "
+                f"scatter (chi^2 = {t['chi2']:.4g}, {t['dof']} dof, p = {t['p']:.2g}); the "
+                "trap models assume a stationary bead, and a step or drift biases k and "
+                "gamma: cut the record at the step, remove the drift, or add the drift "
+                "effect (model='standard+drift')")
+    return ""
+
+
 #: saturation: a pile-up of at least this many frames at exactly the minimum or maximum value
 #: that holds more than twice as many frames as the next value inwards (an unclipped tail
 #: thins out towards the extreme: a continuous trace has each value once, a quantised one
@@ -118,7 +196,7 @@ def _quantisation_step(values: np.ndarray, n: int) -> float:
     return q if bool(np.all(np.abs(m - np.round(m)) < 1e-3)) else 0.0
 
 
-def _inspect_frames(recs, strict: bool) -> list:
+def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
     """Saturation (frames piled up at exactly the extreme values) and coarse quantisation.
 
     Clipping removes the tails of the position distribution and flattens the trace while the
@@ -128,11 +206,21 @@ def _inspect_frames(recs, strict: bool) -> list:
     error; smaller pile-ups get a note. Quantisation adds white noise of variance step^2/12,
     which the tracking-noise term absorbs: a note above a step of std/4, refused above one
     std, where the rounding error is neither white nor independent of the motion. With
-    ``strict=False`` the refusals become notes and the fit goes on.
+    ``strict=False`` the refusals become notes and the fit goes on. A mean position that
+    moves (a step or drift, :func:`mean_shift`) gets a note unless the model has drift.
+    Two recordings with identical positions (one file listed twice) are refused too.
     """
     notes, errors = [], []
+    seen: dict = {}
     for i, r in enumerate(recs):
         y = np.asarray(r.positions, dtype=float)
+        key = (y.size, hash(y.tobytes()))
+        if key in seen and np.array_equal(np.asarray(recs[seen[key]].positions), y):
+            errors.append(f"recordings {seen[key]} and {i} hold identical positions (the same "
+                          "file listed twice, e.g. at two laser powers?): a joint fit would "
+                          "count the same frames twice and halve their variance's error. "
+                          "Remove the duplicate")
+        seen.setdefault(key, i)
         u, counts = np.unique(y, return_counts=True)
         if u.size < 2:
             continue
@@ -141,13 +229,30 @@ def _inspect_frames(recs, strict: bool) -> list:
             msg, refused = check(y, u, counts, where)
             if msg:
                 (errors if refused else notes).append(msg)
+    if not drift_modelled:
+        shift = mean_shift_sentence(recs, str(getattr(recs[0], "position_unit", "m")))
+        if shift:
+            notes.append(shift[0].upper() + shift[1:])
     if errors:
         if strict:
-            raise ValueError("; ".join(errors) + ". Crop the saturated stretches or fix the "
-                             "detector range/resolution; strict=False fits anyway (with a "
-                             "note; the result is then biased).")
+            raise ValueError("; ".join(errors) + ". Crop the saturated stretches, fix the "
+                             "detector range/resolution or the duplicate; strict=False fits "
+                             "anyway (with a note; the result is then biased).")
         notes = [f"NOT TRUSTWORTHY (strict=False): {e}" for e in errors] + notes
     return notes
+
+
+#: on quantised positions a few frames on the outermost level are chance (integer nm: 3 there
+#: and 1 on the next level): a pile-up must then be significant, the outermost level holding
+#: more frames than the next with binomial probability below this (an unclipped Gaussian
+#: tail puts fewer frames on the outer level than on the next, so 1/2 is conservative)
+_SAT_QUANTISED_P = 1e-3
+
+
+def _binomial_half_tail(c: int, n: int) -> float:
+    """P(X >= c) for X ~ Binomial(n, 1/2)."""
+    return math.fsum(math.comb(n, j) for j in range(c, n + 1)) / 2.0**n if n <= 1000 else \
+        float(0.5 * math.erfc((c - 0.5 - 0.5 * n) / math.sqrt(0.5 * n)))
 
 
 def _saturation(y, u, counts, where):
@@ -155,9 +260,11 @@ def _saturation(y, u, counts, where):
     (``('', False)`` without a pile-up); ``u, counts`` are the distinct values of ``y``."""
     n = y.size
     piles = []
+    quantised = _quantisation_step(u, n) > 0
     for side, j, jn in (("minimum", 0, 1), ("maximum", -1, -2)):
         c, cn = int(counts[j]), int(counts[jn])
-        if c >= _SAT_MIN_FRAMES and c >= 2 * cn + 1:
+        if c >= _SAT_MIN_FRAMES and c >= 2 * cn + 1 and (
+                not quantised or _binomial_half_tail(c, c + cn) < _SAT_QUANTISED_P):
             piles.append((side, c, float(u[j])))
     if not piles:
         return "", False

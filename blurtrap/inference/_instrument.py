@@ -204,7 +204,7 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
     """The plan of a calibration from the recordings' instrument settings and calibrate's
     arguments (which win over the settings); ``hydrodynamics``: the known bead's
     frequency-dependent friction (:mod:`._hydro_known`)."""
-    from ._fixed import parse_fixed
+    from ._fixed import check_plausible, parse_fixed
 
     if lines not in ("auto", "keep"):
         raise ValueError(f"lines must be 'auto' (find and subtract strong lines) or 'keep'; "
@@ -224,6 +224,7 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
     volts = unit == "V"
     mdl = model if model_given else _detector_model(st, detector, anti_aliasing, notes)
     held = parse_fixed(fixed, None)
+    check_plausible(held, volts)
     dfilt = st["diode_filter"]
     if dfilt == "fit" and not mdl.has("detector_filter"):
         mdl = mdl.add("detector_filter")

@@ -14,13 +14,14 @@ from .._config import float64_scope
 from ._assemble import _assemble, _interval_source, _k_mode_of
 from ._fit import fit_ml, fit_ml_fd_newton
 from ._fixed import expand as expand_fixed
+from ._fixed import held_consistency_note, reduced_objective
 from ._fixed import propagate as propagate_fixed
 from ._fixed import reduce as reduce_fixed
-from ._fixed import reduced_objective
 from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
-from ._refusals import _check_fit, _check_relaxation_resolved
+from ._refusals import _check_fit, _check_relaxation_resolved, _held_sentence
+from ._result import FitError
 from ._screen_fit import fit_nll_only
 from ._spectral import _psd_jit, _spectral_args, spectral_gof, unpadded
 from ._starts import _start_vector
@@ -34,12 +35,21 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
     args = _spectral_args(recs, layout, model, n_blocks, f_range, excluded)
     scale = _start_vector(recs, layout, model.noise, start)
     out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
-    _check_fit(out, layout.names, method_name, strict, notes, recs)
+    _check_fit(out, layout.names, method_name, strict, notes, recs, fixed)
     if robust:
         out, held, args = _robust_refit(out, held, args, scale, layout, fixed, notes,
                                         method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
+    pooled = shared_k_note(layout, args.power / psd, args.weight, gof["p_value"])
+    if pooled:
+        notes = [*notes, pooled]
+    if fixed:
+        note = held_consistency_note(spectral_nll, args, out.value, scale, layout.names, fixed,
+                                     eqx.tree_at(lambda a: a.power, args, psd),
+                                     gof["p_value"])
+        if note:
+            notes = [*notes, note]
     extras = {"n_blocks": n_blocks, "nll": float(out.nll), "k_mode": _k_mode_of(layout),
               "f": unpadded(args, args.f), "ratio": unpadded(args, args.power / psd),
               "weight": unpadded(args, args.weight)}
@@ -47,7 +57,46 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                     at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(spectral_nll, args, scale, out, held))
     block = None if n_blocks <= 1 else min(r.n_frames for r in recs) // n_blocks
-    return _check_relaxation_resolved(res, recs, method_name, block)
+    return _relaxation_resolved(res, recs, method_name, fixed, block)
+
+
+#: a shared stiffness is questioned when the joint fit's goodness of fit and at least two of
+#: the recordings sharing it have p below this
+_POOL_ALPHA = 1e-3
+
+
+def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
+    """A note when recordings that share one k (no laser powers, or equal ones) do not fit
+    it: the joint goodness of fit and two or more of the sharing recordings' own binned
+    tests fail. Recordings of different stiffness (another power, bead or height) pooled
+    into one k give a k between theirs with errors far too small; the note names which
+    lie above the joint spectrum at low frequency (softer: S(0) ~ gamma/k^2) and which
+    below."""
+    if not gof_p < _POOL_ALPHA or layout.linear_power:
+        return None
+    idx = np.asarray(layout.k_index)
+    ratio, weight = np.asarray(ratio), np.asarray(weight)
+    bad = []
+    for g in np.unique(idx):
+        members = np.flatnonzero(idx == g)
+        if members.size < 2:
+            continue
+        for i in members:
+            p = spectral_gof(ratio[i:i + 1], weight[i:i + 1], 0)["p_value"]
+            if p < _POOL_ALPHA:
+                keep = np.flatnonzero(weight[i] > 0)
+                low = keep[: max(8, keep.size // 20)]  # the lowest 5 % of the band
+                level = float(np.average(ratio[i, low], weights=weight[i, low]))
+                bad.append((int(i), p, level, layout.k_labels[g]))
+    if len(bad) < 2:
+        return None
+    shown = "; ".join(f"recording {i}: p = {p:.2g}, low-frequency power {lv:.2g} x the joint "
+                      f"fit ({'softer' if lv > 1 else 'stiffer'} than {lab})"
+                      for i, p, lv, lab in bad)
+    return (f"recordings sharing one stiffness do not fit it (joint goodness of fit p = "
+            f"{gof_p:.2g}; {shown}): recordings of different stiffness (another laser power, "
+            "bead or height) pooled into one k give a k between theirs with errors far too "
+            "small. Give each recording's laser_power, or fit k='per_recording'")
 
 
 #: robust spectral fit: an ordinate whose Gamma upper tail probability under the fit is below
@@ -72,7 +121,7 @@ def _robust_refit(out, held, args, scale, layout, fixed, notes, method, strict, 
         dropped |= spikes
         args = eqx.tree_at(lambda a: a.weight, args, jnp.asarray(np.where(spikes, 0.0, w)))
         out, held = _fit_held(fit_ml, spectral_nll, scale, args, layout.names, fixed)
-        _check_fit(out, layout.names, method, strict, notes, recs)
+        _check_fit(out, layout.names, method, strict, notes, recs, fixed)
     if dropped.any():
         fr = np.asarray(args.f)[dropped]
         shown = ", ".join(f"{v:.5g}" for v in fr[:8]) + (" ..." if fr.size > 8 else "")
@@ -142,16 +191,36 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
                                                       or float(cand.nll) < float(out.nll))):
             out, s_out, held = cand, s0, h0
     assert out is not None  # starts is never empty
-    _check_fit(out, layout.names, "likelihood (exact)", recs=recs)
+    _check_fit(out, layout.names, "likelihood (exact)", recs=recs, fixed=fixed)
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
+    pooled = shared_k_note(layout, sargs.power / psd, sargs.weight, gof["p_value"])
+    if pooled:
+        notes = [*notes, pooled]
+    if fixed:
+        note = held_consistency_note(nll, args, out.value, moment, names, fixed,
+                                     eqx.tree_at(lambda a: a.power, sargs, psd),
+                                     gof["p_value"])
+        if note:
+            notes = [*notes, note]
     extras = {"loglik": -float(out.nll)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(nll, args, s_out, out, held,
                                                      hessian="fd"))
-    return _check_relaxation_resolved(res, recs, "likelihood (exact)")
+    return _relaxation_resolved(res, recs, "likelihood (exact)", fixed)
+
+
+def _relaxation_resolved(res, recs, method, fixed, block=None):
+    """:func:`_check_relaxation_resolved`, its refusal naming the held values (a wrong one
+    runs k or tau off too)."""
+    try:
+        return _check_relaxation_resolved(res, recs, method, block)
+    except FitError as e:
+        if not fixed:
+            raise
+        raise FitError(str(e) + _held_sentence(fixed)) from None
 
 
 def _fit_start(nll, scale, args):

@@ -11,6 +11,9 @@ import numpy as np
 _K_MODES = (None, "shared", "per_recording", "per_power", "linear_power")
 #: D of a 1 nm sphere in water is ~2e-10 m^2/s: anything above this is a unit slip.
 _MAX_PLAUSIBLE_DIFFUSION = 1e-8
+#: D of a 50 um bead in glycerol near 0 C (12 Pa s) is ~4e-19 m^2/s: anything below this
+#: is a unit slip (m^2/s given to the CLI's um^2/s option: 1.5e-13 "um^2/s" = 1.5e-25 m^2/s)
+_MIN_PLAUSIBLE_DIFFUSION = 1e-19
 
 
 def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pade, start,
@@ -35,13 +38,13 @@ def _check_options(recs, method, likelihood, k, n_blocks, f_range, diffusion, pa
 def _check_n_blocks(method, n_blocks):
     """``n_blocks`` as an int (None when not given); only with method='psd'."""
     if n_blocks is not None:
-        if method != "psd":
-            raise ValueError(f"n_blocks = {n_blocks!r} applies only to method='psd'; got "
-                             f"method = {method!r}")
         if isinstance(n_blocks, bool) or not isinstance(n_blocks, numbers.Integral) \
                 or n_blocks < 1:
             raise ValueError(f"n_blocks must be an integer >= 1 (number of non-overlapping "
                              f"blocks); got n_blocks = {n_blocks!r}")
+        if method != "psd":
+            raise ValueError(f"n_blocks = {n_blocks!r} applies only to method='psd'; got "
+                             f"method = {method!r}")
         n_blocks = int(n_blocks)
     return n_blocks
 
@@ -79,6 +82,12 @@ def _check_diffusion(method, diffusion, pade):
         if not (math.isfinite(d) and d > 0):
             raise ValueError(f"diffusion (diffusion coefficient D) must be finite and > 0 "
                              f"m^2/s; got diffusion = {diffusion!r}")
+        if d < _MIN_PLAUSIBLE_DIFFUSION:
+            raise ValueError(
+                f"diffusion = {d:g} m^2/s ({d * 1e12:g} um^2/s) is implausibly small (a 50 um "
+                "bead in glycerol has D ~ 4e-19 m^2/s; a 1 um bead in water 2e-13 m^2/s): "
+                "check its unit. D is in m^2/s in Python (1 um^2/s = 1e-12 m^2/s); the CLI's "
+                "--diffusion takes um^2/s")
         if d > _MAX_PLAUSIBLE_DIFFUSION:
             raise ValueError(
                 f"diffusion = {d:g} m^2/s is implausibly large (a 1 nm sphere in water has "

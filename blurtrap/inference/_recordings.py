@@ -8,6 +8,8 @@ import numbers
 import os
 from typing import Any
 
+import numpy as np
+
 from .._config import warn_if_float32
 
 
@@ -116,3 +118,42 @@ def _stokes_notes(recs, radii, res) -> list:
                 "the temperature"]
     return []
 
+
+
+def _plausibility_notes(recs, res) -> list:
+    """A note when a fitted stiffness or friction lies outside its physically plausible
+    range (``Param.bounds``, the support of the default priors): almost always positions in
+    another unit than declared. k and gamma scale as 1/s^2 when the positions are s x too
+    large, so the note names the unit that brings them into range (positions in metres;
+    not for volts)."""
+    from ..data._plausible import _UNIT_METRES, declared_unit
+    from ..effects import QUANTITIES
+
+    bad = []
+    for name, v in zip(res.param_names, np.asarray(res.values, dtype=float)):
+        q = QUANTITIES.get(name.split("[")[0])
+        if name.split("[")[0] not in ("k", "c", "gamma") or q is None or q.bounds is None:
+            continue
+        if math.isfinite(v) and v > 0 and not q.bounds[0] <= v <= q.bounds[1]:
+            bad.append((name, v, q))
+    if not bad:
+        return []
+    shown = "; ".join(f"{n} = {v:.3g} {q.unit} ({v * q.lab_factor:.3g} {q.lab_unit}), "
+                      f"expected {q.bounds[0]:g}..{q.bounds[1]:g} {q.unit}" for n, v, q in bad)
+    declared = declared_unit(getattr(recs[0], "metadata", None) or {})
+    hint = ""
+    if declared in _UNIT_METRES:
+        best = None
+        for unit, metres in _UNIT_METRES.items():
+            s = metres / _UNIT_METRES[declared]  # positions were s x what was declared
+            ok = all(q.bounds[0] <= v / s**2 <= q.bounds[1] for _, v, q in bad)
+            # the likeliest: closest to the middle (log scale) of the plausible ranges
+            dist = sum(abs(math.log(v / s**2 / math.sqrt(q.bounds[0] * q.bounds[1])))
+                       for _, v, q in bad)
+            if unit != declared and ok and (best is None or dist < best[1]):
+                best = (unit, dist)
+        if best is not None:
+            hint = (f"; positions declared in {declared!r} give these values, in "
+                    f"{best[0]!r} they would be in range: check the position unit")
+    return [f"implausible: {shown} (a trapped bead in a liquid lies within these "
+            f"ranges){hint or ': check the position unit and scale'}"]

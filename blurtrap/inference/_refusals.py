@@ -10,9 +10,29 @@ import math
 import numpy as np
 
 from ..physics import BOLTZMANN
-from ._frames import _outlier_sentence, _robust_temporal_z, temporal_information
+from ._frames import (
+    _outlier_sentence,
+    _robust_temporal_z,
+    mean_shift_sentence,
+    temporal_information,
+)
 from ._result import FitError
 from ._variance import empirical_variance_se
+
+
+def refuse_without_temporal_information(recs) -> None:
+    """``FitError`` when no recording's frames carry temporal information and fewer than 3
+    exposures or laser powers identify gamma otherwise: the refusal of ``calibrate``'s
+    ``method="auto"`` (without a given friction or D), for callers that fit directly
+    (``diagnose``)."""
+    info = [temporal_information(r) for r in recs]
+    if any(ok for ok, _ in info):
+        return
+    n_exp = len({float(r.exposure) for r in recs})
+    powers = [r.laser_power for r in recs]
+    if n_exp >= 3 or (all(p is not None for p in powers) and len(set(powers)) >= 3):
+        return
+    raise FitError(_no_temporal_information_message(recs, info))
 
 
 def _no_temporal_information_message(recs, info):
@@ -41,6 +61,9 @@ def _slow_relaxation_hint(recs, values, names):
     tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
     dur = min(r.n_frames * float(r.frame_interval) for r in recs)
     if math.isfinite(tau) and tau > dur / 30.0:
+        if mean_shift_sentence(recs):  # named among the causes: the step/drift's doing
+            return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is the step or "
+                    "drift read as a slow relaxation.")
         info = [temporal_information(r) for r in recs]
         if all(z < 0.5 * math.sqrt(r.n_frames) for r, (_, z) in zip(recs, info)):
             return f" The fit ran tau = gamma/k to {tau:.3g} s, but " + \
@@ -49,6 +72,13 @@ def _slow_relaxation_hint(recs, values, names):
                 f"with the record ({dur:.3g} s): the bead diffuses almost freely, so k is not "
                 "identified; record longer or use a stiffer trap.")
     return ""
+
+
+def _shift_hint(recs) -> str:
+    """A step or drift read as a slow relaxation: the sentence naming it ('' without)."""
+    shift = mean_shift_sentence(recs)
+    return (f" But the frames show that {shift}; a stationary model reads that as a very "
+            "slow relaxation." if shift else "")
 
 
 def _check_relaxation_resolved(res, recs, method, block_frames=None):
@@ -78,6 +108,7 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
                 f"= {g:.4g} +- {ge:.2g} N s/m (D = {d * 1e12:.4g} um^2/s) is still determined. "
                 "Record longer than ~10 tau, use a stiffer trap"
                 + (", or fewer, longer blocks (n_blocks)" if block_frames else "") + "."
+                + _shift_hint(recs)
             )
     return res
 
@@ -116,7 +147,7 @@ def _check_psd_blocks(res, recs, n_blocks, explicit):
             return dataclasses.replace(res, notes=res.notes + (
                 msg + "; use fewer blocks (n_blocks) or method='likelihood'",))
         raise FitError(msg + ". The record is too short for a blocked PSD fit: use "
-                       "method='likelihood' (exact for any record length).")
+                       "method='likelihood' (exact for any record length)." + _shift_hint(recs))
     return res
 
 
@@ -150,7 +181,10 @@ def _singular_fisher_causes(recs, values, names) -> str:
                       "record at several exposures")
     if out:
         causes.append(out)
-    for i, r in enumerate(recs):
+    shift = mean_shift_sentence(recs)
+    if shift:
+        causes.append(shift)
+    for i, r in enumerate(recs if not shift else ()):
         seg = np.array_split(np.asarray(r.positions, dtype=float), 8)
         if len(seg[-1]) < 8:
             continue
@@ -171,11 +205,29 @@ def _singular_fisher_causes(recs, values, names) -> str:
     return "what the frames show: " + "; ".join(causes)
 
 
-def _check_fit(out, names, method, strict=True, notes=None, recs=None):
+def _held_sentence(fixed) -> str:
+    """Names the held values in a refusal: a wrong one (value or unit) makes fits fail too."""
+    if not fixed:
+        return ""
+    from ..effects import QUANTITIES
+
+    shown = []
+    for name, (v, _) in fixed.items():
+        q = QUANTITIES.get(name.split("[")[0])
+        shown.append(f"{name} = {v:.4g}" + (f" {q.unit} ({v * q.lab_factor:.4g} {q.lab_unit})"
+                                            if q is not None else " (SI)"))
+    return (f" Held in this fit: {', '.join(shown)}; a held value that disagrees with the "
+            "data (a wrong value or unit: SI in Python, lab units on the CLI's --fix) also "
+            "makes the fit fail: check it, or fit without it.")
+
+
+def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=None):
     """Refuse (``FitError``) a fit that did not converge or whose Fisher information is
-    singular, in effect too (see :func:`_unidentified`), with the causes the frames show;
-    with ``strict=False`` a singular information only adds a note."""
+    singular, in effect too (see :func:`_unidentified`), with the causes the frames show
+    (and the held values, ``fixed``); with ``strict=False`` a singular information only
+    adds a note."""
     hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
+    hint += _held_sentence(fixed)
     if not bool(out.converged):
         seen = _outlier_sentence(recs) if recs else ""
         raise FitError(

@@ -89,6 +89,12 @@ def _spectral_args(recs, layout, model, n_blocks, f_range, excluded=None):
             f, p, wt = f[sel], p[sel], wt[sel]
         for a, b in excluded or ():
             wt = np.where((f >= a) & (f <= b), 0.0, wt)  # excluded ordinates: no weight
+        if excluded and f.size and np.count_nonzero(wt) < max(16, f.size // 20):
+            raise ValueError(
+                f"excluded ranges {[tuple(e) for e in excluded]} Hz leave "
+                f"{np.count_nonzero(wt)} of the {f.size} ordinates "
+                f"({f[0]:.4g}-{f[-1]:.4g} Hz) of a recording to fit: too few to fit the "
+                "spectrum. Exclude only narrow bands (lines, resonances), in Hz")
         fs.append(f)
         ps.append(p)
         ws.append(wt)

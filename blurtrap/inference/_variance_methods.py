@@ -150,13 +150,23 @@ def _fit_allan(recs, layout, model, notes):
                      extras={"allan": [e.to_dict() for e in est]})
 
 
-def _equipartition(recs, diffusion, pade):
+def _equipartition(recs, diffusion, pade, tracking=None):
     """k per recording from its frame variance: naive ``kT/var``, or blur-corrected with a
-    given D (exact or Pade inversion of var = kT/k S(alpha))."""
+    given D (exact or Pade inversion of var = kT/k S(alpha)); ``tracking``: a known
+    tracking-error variance ``(eps2, se)`` [m^2] subtracted from the variance."""
     ks, kerr = [], []
     notes = []
-    for r in recs:
+    eps2, eps2_se = tracking if tracking is not None else (0.0, 0.0)
+    for i, r in enumerate(recs):
         v, se = empirical_variance_se(r.positions)
+        if eps2 > 0:
+            if eps2 >= v:
+                raise ValueError(f"fixed['tracking_var'] = {eps2:.4g} m^2 is not below the "
+                                 f"frame variance {v:.4g} m^2 of recording {i}: the tracking "
+                                 "error cannot exceed the whole variance (check its unit: m^2 "
+                                 "in Python, nm^2 on the CLI)")
+            v -= eps2
+            se = math.hypot(se, eps2_se)
         kt = BOLTZMANN * float(r.temperature)
         if diffusion is None:
             k = kt / v
@@ -175,13 +185,22 @@ def _equipartition(recs, diffusion, pade):
             kerr.append(abs(dk) * se)
     if diffusion is None:
         notes.append("naive equipartition k = kT/var(X_m): biased high by motion blur "
-                     "(var is reduced by S(alpha)) and low by tracking noise (var is raised)")
+                     "(var is reduced by S(alpha))")
         gamma, gerr = math.nan, math.nan
     else:
         notes.append(f"blur-corrected equipartition with given D = {diffusion:.4g} m^2/s "
                      f"({'Pade' if pade else 'exact'} inversion)")
         gamma = BOLTZMANN * float(recs[0].temperature) / diffusion
         gerr = 0.0
+    if tracking is None:
+        notes.append("equipartition assumes no tracking error (eps^2 = 0): tracking noise "
+                     "raises the frame variance and biases k low by about eps^2/var (k too "
+                     "small by 10 % when eps^2 is a tenth of the variance); give a known "
+                     "tracking-error variance with fixed={'tracking_var': eps2} [m^2] (CLI: "
+                     "--fix tracking_var=NM2), or fit it: method='likelihood'")
+    else:
+        notes.append(f"tracking-error variance eps^2 = {eps2:.4g} m^2 (held) subtracted from "
+                     "the frame variance")
     names = tuple(f"k[{i}]" for i in range(len(recs))) if len(recs) > 1 else ("k",)
     values = np.array(ks + ([gamma] if diffusion is not None else []))
     errs = np.array(kerr + ([gerr] if diffusion is not None else []))

@@ -12,6 +12,7 @@ from ._frames import _inspect_frames as inspect_frames
 from ._instrument import default_model
 from ._ml_fits import screen_model
 from ._recordings import as_recordings
+from ._refusals import refuse_without_temporal_information
 from ._spectral import _np_periodogram as np_periodogram
 
 __all__ = [
@@ -21,5 +22,6 @@ __all__ = [
     "html_table",
     "inspect_frames",
     "np_periodogram",
+    "refuse_without_temporal_information",
     "screen_model",
 ]

@@ -196,3 +196,20 @@ def test_blocked_psd_items_get_calibrates_goodness_of_fit():
                            n_blocks=8)
         assert abs(b.k[i] / one.k - 1) < 1e-8
         assert b.gof_dof == one.gof["dof"] and abs(b.gof_p[i] - one.gof["p_value"]) < 1e-6
+
+
+def test_clipped_and_coarsely_quantised_rows_are_refused_like_calibrate():
+    # a detector saturating at +1.5 std, and positions rounded to 30 nm (std 20 nm):
+    # calibrate refuses both; so must the batch, item by item
+    x = ar1(K, 8192, 3, seed=4)
+    sd = float(np.std(x[0]))
+    x[1] = np.minimum(x[1], 1.5 * sd)
+    x[2] = np.round(x[2] / 30e-9) * 30e-9
+    for i in (1, 2):
+        with pytest.raises(ValueError, match="saturated|quantised"):
+            bt.calibrate(bt.Recording(x[i], frame_interval=DT, exposure=W0))
+    b = bt.calibrate_batch(x, frame_interval=DT, exposure=W0)
+    assert b.status[0] == "ok"
+    assert b.status[1].startswith("refused: item 1") and "saturated (clipped)" in b.status[1]
+    assert b.status[2].startswith("refused: item 2") and "quantised in steps" in b.status[2]
+    assert np.isnan(b.k[1]) and np.isnan(b.k[2])

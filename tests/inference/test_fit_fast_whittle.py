@@ -344,6 +344,17 @@ def test_chi2_sf_equals_scipy(dof):
     assert _fit.chi2_sf(0.0, dof) == 1.0 and _fit.chi2_sf(math.inf, dof) == 0.0
 
 
+@pytest.mark.parametrize("d1,d2", [(1, 1), (15, 71.7), (15, 35.8), (3, 1000), (40, 2.5)])
+def test_f_sf_equals_scipy(d1, d2):
+    from blurtrap.inference._chi2 import f_sf
+
+    for x in (1e-4, 0.1, 0.5, 1.0, 1.7, 3.0, 10.0, 100.0, 1e4):
+        want = special.fdtrc(d1, d2, x)
+        if want > 1e-250:
+            assert abs(f_sf(x, d1, d2) / want - 1) < 1e-9, (d1, d2, x, want)
+    assert f_sf(0.0, d1, d2) == 1.0 and f_sf(math.inf, d1, d2) == 0.0
+
+
 # ------------------------------------------------------------------------------------------
 # batch: items that the vmapped steps do not finish are refitted alone
 # ------------------------------------------------------------------------------------------
