@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ..inference import CalibrationResult
+from ..inference.internal import mean_shift
 from ..physics import water_viscosity
 
 
@@ -60,8 +61,16 @@ def _evidence(effect: str, fit: CalibrationResult, recs) -> str:
     if effect == "drift":
         hi = max(5 * fmin, min(0.05 * fc, 0.01 * fs))
         r, n = _band_ratio(f, ratio, w, 0, hi)
-        verdict = ("excess at the lowest frequencies: drift" if _signature(r, n, True)
-                   else "no low-frequency excess (not the signature of drift)")
+        if _signature(r, n, True):
+            verdict = "excess at the lowest frequencies: drift"
+        else:
+            shifts = [t for t in (mean_shift(rec.positions) for rec in recs) if t is not None]
+            p = min((t["p"] for t in shifts), default=math.nan)
+            verdict = (f"no significant excess in this band, but the means of "
+                       f"{shifts[0]['dof'] + 1} segments move beyond their scatter (p = "
+                       f"{p:.2g}): drift" if p < 1e-3 else
+                       "no significant excess in this band (the likelihood test weighs the "
+                       "whole low-frequency spectrum)")
         return f"power below {hi:.3g} Hz is {r:.3g}x the model ({n} ordinates): {verdict}"
     if effect in _HIGH_F:
         r_hi, n_hi = _band_ratio(f, ratio, w, 0.7 * fs / 2, fs / 2)

@@ -9,6 +9,7 @@ is the estimators' own object, re-exported unchanged.
 from ._fit import chi2_sf
 from ._fit_inputs import html_table
 from ._frames import _inspect_frames as inspect_frames
+from ._frames import mean_shift
 from ._instrument import default_model
 from ._ml_fits import screen_model
 from ._recordings import as_recordings
@@ -21,6 +22,7 @@ __all__ = [
     "default_model",
     "html_table",
     "inspect_frames",
+    "mean_shift",
     "np_periodogram",
     "refuse_without_temporal_information",
     "screen_model",

@@ -2,6 +2,8 @@
 aliasing must be tried together (each alone makes the naive fit worse); and a diagnosis never
 calls a model adequate without saying when a non-significant effect would move k or gamma."""
 
+import math
+
 import jax
 import numpy as np
 import pytest
@@ -47,7 +49,32 @@ def test_evidence_names_an_effect_only_with_its_signature(naive_diagnosis):
     drift = next(c for c in d.ranking if c.effect == "drift")
     assert not drift.significant
     assert not drift.evidence.split(";")[0].endswith(": drift"), drift.evidence
-    assert "not the signature of drift" in drift.evidence
+    assert "no significant excess in this band" in drift.evidence
+
+
+def test_drift_evidence_names_a_moving_mean_the_band_misses():
+    # a slow ramp (40 nm over the record, std 9 nm) with a fit whose lowest band shows no
+    # excess: the evidence names the moving segment means (it used to say "not the
+    # signature of drift" while ranking drift first)
+    from scipy.signal import lfilter
+
+    from blurtrap.diagnostics._evidence import _evidence
+
+    n, dt = 65536, 1 / 1500
+    f = np.linspace(1.0, 750.0, 4000)
+
+    class Fit:  # what _evidence reads of a fit: a flat data/model ratio
+        k, gamma = 5e-5, 1.88e-8
+        extras = {"f": f, "ratio": np.ones_like(f), "weight": np.ones_like(f)}
+
+    rho = math.exp(-dt * 5e-5 / 1.88e-8)
+    e = np.random.default_rng(3).standard_normal(n) * math.sqrt(1 - rho**2)
+    x = lfilter([1.0], [1.0, -rho], e) * 9e-9
+    text = _evidence("drift", Fit(), [bt.Recording(x + np.linspace(0, 40e-9, n),
+                                                   frame_interval=dt, exposure=1e-6)])
+    assert "segments move beyond their scatter" in text and text.endswith(": drift"), text
+    text = _evidence("drift", Fit(), [bt.Recording(x, frame_interval=dt, exposure=1e-6)])
+    assert "no significant excess in this band" in text and not text.endswith(": drift")
 
 
 def test_top_candidate_quotes_the_gof_of_the_fit_it_carries(naive_diagnosis):
