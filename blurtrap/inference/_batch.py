@@ -266,7 +266,7 @@ def _fit_chunks(y, shared: SpectralArgs, acq, n_blocks, m, check_units: bool, pe
     for i0 in range(0, b, chunk):
         i1 = min(i0 + chunk, b)
         power, starts, log_ref, stats[i0:i1], pre[i0:i1] = _prepare(
-            y[i0:i1], n_blocks, m, dt, w, t, noise, check_units)
+            y[i0:i1], n_blocks, m, dt, w, t, noise, check_units, i0)
         if np.all(pre[i0:i1] != ""):  # nothing to fit in this chunk
             pending.append((i0, i1, None))
             continue

@@ -56,7 +56,7 @@ def _moment_starts(c0, c1, c2, dt, w, temp):
 _HOST_ROWS = 16
 
 
-def _periodograms(y, n_blocks, m, dt):
+def _periodograms(y, n_blocks, m, dt, first=0):
     """Block-averaged periodograms (B, M//2) of every row: mean removed per block, ordinates
     j = 1..M/2, ``dt/M |FFT|^2`` averaged over the blocks; with the lag moments of
     :func:`_lag_moments` (3, B), the mean ordinate (B,), the per-row checks of
@@ -69,7 +69,7 @@ def _periodograms(y, n_blocks, m, dt):
     frames = np.full(y.shape[0], "", dtype=object)
     for i in range(0, y.shape[0], _HOST_ROWS):
         stats[i:i + _HOST_ROWS] = checks.row_stats(y[i:i + _HOST_ROWS])
-        frames[i:i + _HOST_ROWS] = checks.frame_status(y[i:i + _HOST_ROWS], i)
+        frames[i:i + _HOST_ROWS] = checks.frame_status(y[i:i + _HOST_ROWS], first + i)
         with np.errstate(all="ignore"):  # rows with NaN/inf are replaced in _prepare
             rows = out[i:i + _HOST_ROWS]
             rows[:] = _np_periodogram(y[i:i + _HOST_ROWS, : m * n_blocks], dt, n_blocks)[1]
@@ -78,11 +78,12 @@ def _periodograms(y, n_blocks, m, dt):
     return out, mom, avg, stats, frames
 
 
-def _prepare(y, n_blocks, m, dt, w, temp, noise, check_units):
+def _prepare(y, n_blocks, m, dt, w, temp, noise, check_units, first=0):
     """Host-side inputs of the fit for rows ``y``: periodograms (B, M//2), start values, log
     reference levels, the per-row checks (B, 6) and the status of rows that are not fitted
-    (``""`` for the others). Rows not fitted get a stand-in spectrum (not reported)."""
-    power, mom, avg, stats, frames = _periodograms(y, n_blocks, m, dt)
+    (``""`` for the others; ``first`` numbers the rows in messages). Rows not fitted get a
+    stand-in spectrum (not reported)."""
+    power, mom, avg, stats, frames = _periodograms(y, n_blocks, m, dt, first)
     pre = checks.prefit_status(stats, check_units)
     pre = np.where((pre == "") & (frames != ""), frames, pre)  # after the Recording checks
     skip = pre != ""

@@ -68,7 +68,8 @@ _POOL_ALPHA = 1e-3
 def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
     """A note when recordings that share one k (no laser powers, or equal ones) do not fit
     it: the joint goodness of fit and two or more of the sharing recordings' own binned
-    tests fail. Recordings of different stiffness (another power, bead or height) pooled
+    tests fail, some above the joint spectrum at low frequency and some below. Recordings of
+    different stiffness (another power, bead or height) pooled
     into one k give a k between theirs with errors far too small; the note names which
     lie above the joint spectrum at low frequency (softer: S(0) ~ gamma/k^2) and which
     below."""
@@ -88,8 +89,9 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
                 low = keep[: max(8, keep.size // 20)]  # the lowest 5 % of the band
                 level = float(np.average(ratio[i, low], weights=weight[i, low]))
                 bad.append((int(i), p, level, layout.k_labels[g]))
-    if len(bad) < 2:
-        return None
+    levels = [lv for _, _, lv, _ in bad]
+    if len(bad) < 2 or not (min(levels) < 1.0 < max(levels)):
+        return None  # all on one side: a shared misfit (the model), not a pooling
     shown = "; ".join(f"recording {i}: p = {p:.2g}, low-frequency power {lv:.2g} x the joint "
                       f"fit ({'softer' if lv > 1 else 'stiffer'} than {lab})"
                       for i, p, lv, lab in bad)

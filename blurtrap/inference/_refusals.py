@@ -28,6 +28,10 @@ def refuse_without_temporal_information(recs) -> None:
     info = [temporal_information(r) for r in recs]
     if any(ok for ok, _ in info):
         return
+    from ..data import instrument_settings
+
+    if any(instrument_settings(r)["friction"] == "stokes" for r in recs):
+        return  # the friction is known: calibrate fits k from the blurred variance
     n_exp = len({float(r.exposure) for r in recs})
     powers = [r.laser_power for r in recs]
     if n_exp >= 3 or (all(p is not None for p in powers) and len(set(powers)) >= 3):
@@ -61,7 +65,7 @@ def _slow_relaxation_hint(recs, values, names):
     tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
     dur = min(r.n_frames * float(r.frame_interval) for r in recs)
     if math.isfinite(tau) and tau > dur / 30.0:
-        if mean_shift_sentence(recs):  # named among the causes: the step/drift's doing
+        if mean_shift_sentence(recs, _unit(recs)):  # named among the causes: the step/drift's doing
             return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is the step or "
                     "drift read as a slow relaxation.")
         info = [temporal_information(r) for r in recs]
@@ -74,9 +78,13 @@ def _slow_relaxation_hint(recs, values, names):
     return ""
 
 
+def _unit(recs) -> str:
+    return str(getattr(recs[0], "position_unit", "m")) if recs else "m"
+
+
 def _shift_hint(recs) -> str:
     """A step or drift read as a slow relaxation: the sentence naming it ('' without)."""
-    shift = mean_shift_sentence(recs)
+    shift = mean_shift_sentence(recs, _unit(recs))
     return (f" But the frames show that {shift}; a stationary model reads that as a very "
             "slow relaxation." if shift else "")
 
@@ -181,7 +189,7 @@ def _singular_fisher_causes(recs, values, names) -> str:
                       "record at several exposures")
     if out:
         causes.append(out)
-    shift = mean_shift_sentence(recs)
+    shift = mean_shift_sentence(recs, _unit(recs))
     if shift:
         causes.append(shift)
     for i, r in enumerate(recs if not shift else ()):

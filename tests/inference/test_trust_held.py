@@ -233,6 +233,17 @@ def test_stationary_frames_raise_no_mean_shift():
             flagged += t["significant"]
     assert flagged == 0
     assert np.mean(np.array(ps) < 0.01) < 0.05
+    # slow relaxation under white noise (which shortens a lag-1 estimate of tau, and so the
+    # batch means, so that stationary records looked like drifting ones): no flag
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(12)
+    for tau in (30.0, 300.0, 2000.0):
+        rho = math.exp(-1.0 / tau)
+        for _ in range(10):
+            y = lfilter([1.0], [1.0, -rho], rng.standard_normal(65536) * math.sqrt(1 - rho**2))
+            t = mean_shift(y + math.sqrt(0.3) * rng.standard_normal(65536))
+            assert t is None or not t["significant"], (tau, t)
 
 
 # --------------------------------------------------------------------------------------
@@ -251,6 +262,11 @@ def test_pooling_recordings_of_different_stiffness_is_noted():
     assert "recording 0" in note and "stiffer" in note
     assert "recording 1" in note and "softer" in note and "per_recording" in note
     assert not any("sharing one stiffness" in s for s in fit(a, c).notes)
+    # the same stiffness with a misfit the model shares (a wrong exposure on both): the
+    # recordings lie on one side of the joint spectrum, which is not a pooling
+    wrong = bt.calibrate([bt.Recording(z, frame_interval=DT, exposure=DT) for z in (a, c)],
+                         strict=False)
+    assert not any("sharing one stiffness" in s for s in wrong.notes)
 
 
 def test_diagnose_refuses_white_frames_like_calibrate():
