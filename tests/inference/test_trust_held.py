@@ -262,11 +262,25 @@ def test_pooling_recordings_of_different_stiffness_is_noted():
     assert "recording 0" in note and "stiffer" in note
     assert "recording 1" in note and "softer" in note and "per_recording" in note
     assert not any("sharing one stiffness" in s for s in fit(a, c).notes)
-    # the same stiffness with a misfit the model shares (a wrong exposure on both): the
-    # recordings lie on one side of the joint spectrum, which is not a pooling
-    wrong = bt.calibrate([bt.Recording(z, frame_interval=DT, exposure=DT) for z in (a, c)],
-                         strict=False)
-    assert not any("sharing one stiffness" in s for s in wrong.notes)
+
+
+def test_a_misfit_shared_by_all_recordings_is_not_called_pooling():
+    # both recordings below the joint spectrum at low frequency and above it elsewhere (a
+    # model misfit they share): no pooling note; one above and one below: the note
+    from blurtrap.inference._ml_fits import shared_k_note
+    from blurtrap.inference._problems import make_layout
+
+    recs = [bt.Recording(circulant_frames(5e-5, 1.88e-8, 1e-6, DT, EPS2, 512, seed=s),
+                         frame_interval=DT, exposure=1e-6) for s in (1, 2)]
+    layout = make_layout(recs, "shared", True)
+    m = 4096
+    low = np.arange(m) < m // 20
+    one_side = np.where(low, 0.7, 1.3)
+    w = np.ones((2, m))
+    assert shared_k_note(layout, np.stack([one_side, one_side]), w, 1e-30) is None
+    note = shared_k_note(layout, np.stack([one_side, np.where(low, 1.5, 0.8)]), w, 1e-30)
+    assert note is not None and "stiffer" in note and "softer" in note
+    assert shared_k_note(layout, np.stack([one_side, one_side]), w, 0.5) is None
 
 
 def test_diagnose_refuses_white_frames_like_calibrate():
