@@ -131,14 +131,12 @@ def _line_blocks(path: Path):
 
 
 def _parse_header(path: Path, header: str, position_unit, pixel_size_m):
-    """``(has_time, xcol, unit, px)`` of a header ``[t_s,]x_<unit>[,stage_<unit>]`` (the
-    stage column: :func:`_stage_column`)."""
+    """``(has_time, xcol, unit, px)`` of a header ``[t_s,]x_<unit>[,stage_<unit>]``."""
     for sep, name in ((";", "semicolons"), ("\t", "tabs")):
-        if sep in header and "," not in header:
-            raise ValueError(
-                f"{path}, line 1: header {_short(header)} separates its columns with {name}; "
-                "blurtrap's CSV format uses commas ('t_s,x_nm'): re-save the file with "
-                "comma separators (and '.' as the decimal point)")
+        if sep in header and "," not in header:  # a spreadsheet's export, not blurtrap's
+            raise ValueError(f"{path}, line 1: header {_short(header)} separates its columns "
+                             f"with {name}; blurtrap's CSV uses commas ('t_s,x_nm'): re-save "
+                             "it with comma separators (and '.' as the decimal point)")
     cols = [c.strip() for c in header.split(",")]
     expected = (
         f"'{TIME_COLUMN},x_<unit>' or 'x_<unit>' with <unit> one of {', '.join(ALLOWED_UNITS)}, "

@@ -202,31 +202,10 @@ def check_plausible(held: dict, volts: bool = False) -> None:
 HELD_TEST_ALPHA = 1e-2
 
 
-def held_consistency_note(nll, args, value, scale, names, fixed: dict,
-                          fisher_args, gof_p: float = 1.0) -> str | None:
-    """A note when the data disagree with a held value (a score test), else None.
-
-    At the constrained optimum ``value`` (held entries in place), each held parameter ``x``
-    is released alone (the others stay held; a bead's gamma and hydrodynamic radius, both
-    set by its radius, are released together). The one-step (Fisher scoring) estimate of
-    its shift is ``d = -(H_J^{-1} g_J)_x``, with ``g`` the gradient of the negative
-    log-likelihood ``nll`` and ``H`` the expected (Whittle) information at ``value``, over
-    ``J`` = the free parameters and ``x`` (``fisher_args``: the fit's spectral args with the
-    periodogram replaced by the model spectrum at ``value``). If the held value is right,
-    ``d`` has variance ``(H_J^{-1})_xx + s_x^2`` (``s_x`` its given standard error), so
-    ``z = d / sd`` is standard normal (Bonferroni over the directions tested). A gamma held
-    at a bead diameter given as its radius (2x), or an SI value given to a lab-unit option,
-    fails it; a gamma held because the data cannot fix it (dt >> tau) passes, since
-    ``(H_J^{-1})_xx`` is
-    then large. The test is local: a held value far off (k 100x) can make the data's
-    information at it small, so a poor goodness of fit (``gof_p`` below
-    :data:`HELD_TEST_ALPHA` / 10) with held values also gets a note naming them.
-    ``None`` when neither applies."""
-    held = [i for i, n in enumerate(names) if n in fixed]
-    if not held:
-        return None
-    value = np.asarray(value, dtype=float)
-    scale = np.abs(np.asarray(scale, dtype=float))
+def _score_and_information(nll, args, value, scale, fisher_args):
+    """``(g, H)``: the exact gradient of ``nll`` at ``value`` and the expected (Whittle)
+    information there, by central differences of the Whittle gradient on ``fisher_args``
+    (forward ones at a bound 0); None when a step or an entry is not usable."""
     n = value.size
     steps = 1e-4 * np.maximum(np.abs(value), scale)
     if not np.all(steps > 0):
@@ -253,6 +232,39 @@ def held_consistency_note(nll, args, value, scale, names, fixed: dict,
     hess = 0.5 * (hess + hess.T)
     if not (np.all(np.isfinite(hess)) and np.all(np.isfinite(g))):
         return None
+    return g, hess
+
+
+def held_consistency_note(nll, args, value, scale, names, fixed: dict,
+                          fisher_args, gof_p: float = 1.0) -> str | None:
+    """A note when the data disagree with a held value (a score test), else None.
+
+    At the constrained optimum ``value`` (held entries in place), each held parameter ``x``
+    is released alone (the others stay held; a bead's gamma and hydrodynamic radius, both
+    set by its radius, are released together). The one-step (Fisher scoring) estimate of
+    its shift is ``d = -(H_J^{-1} g_J)_x``, with ``g`` the gradient of the negative
+    log-likelihood ``nll`` and ``H`` the expected (Whittle) information at ``value``, over
+    ``J`` = the free parameters and ``x`` (``fisher_args``: the fit's spectral args with the
+    periodogram replaced by the model spectrum at ``value``). If the held value is right,
+    ``d`` has variance ``(H_J^{-1})_xx + s_x^2`` (``s_x`` its given standard error), so
+    ``z = d / sd`` is standard normal (Bonferroni over the directions tested). A gamma held
+    at a bead diameter given as its radius (2x), or an SI value given to a lab-unit option,
+    fails it; a gamma held because the data cannot fix it (dt >> tau) passes, since
+    ``(H_J^{-1})_xx`` is
+    then large. The test is local: a held value far off (k 100x) can make the data's
+    information at it small, so a poor goodness of fit (``gof_p`` below
+    :data:`HELD_TEST_ALPHA` / 10) with held values also gets a note naming them.
+    ``None`` when neither applies."""
+    held = [i for i, n in enumerate(names) if n in fixed]
+    if not held:
+        return None
+    value = np.asarray(value, dtype=float)
+    scale = np.abs(np.asarray(scale, dtype=float))
+    n = value.size
+    derivs = _score_and_information(nll, args, value, scale, fisher_args)
+    if derivs is None:
+        return None
+    g, hess = derivs
     free = [i for i in range(n) if i not in held]
     # directions to release, one at a time (the others stay held): each held parameter, or
     # for a bead radius that sets both gamma (Stokes) and the hydrodynamic radius, the two

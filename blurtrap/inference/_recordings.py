@@ -120,13 +120,16 @@ def _stokes_notes(recs, radii, res) -> list:
 
 
 
+#: the position units whose slips the note below can name (the loaders' canonical names)
+_UNIT_METRES = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
+
+
 def _plausibility_notes(recs, res) -> list:
     """A note when a fitted stiffness or friction lies outside its physically plausible
     range (``Param.bounds``, the support of the default priors): almost always positions in
     another unit than declared. k and gamma scale as 1/s^2 when the positions are s x too
     large, so the note names the unit that brings them into range (positions in metres;
     not for volts)."""
-    from ..data._plausible import _UNIT_METRES, declared_unit
     from ..effects import QUANTITIES
 
     bad = []
@@ -140,7 +143,8 @@ def _plausibility_notes(recs, res) -> list:
         return []
     shown = "; ".join(f"{n} = {v:.3g} {q.unit} ({v * q.lab_factor:.3g} {q.lab_unit}), "
                       f"expected {q.bounds[0]:g}..{q.bounds[1]:g} {q.unit}" for n, v, q in bad)
-    declared = declared_unit(getattr(recs[0], "metadata", None) or {})
+    meta = getattr(recs[0], "metadata", None) or {}
+    declared = str(meta.get("position_unit", "m")) if hasattr(meta, "get") else "m"
     hint = ""
     if declared in _UNIT_METRES:
         best = None

@@ -234,8 +234,8 @@ def test_manifest_fuzz_values_only_clear_errors(bad_input, changes):
 
 # ---- CSV headers and empty files ------------------------------------------------------------
 BAD_HEADERS = [
-    ("t_s;x_nm", r"line 1: position column 't_s;x_nm' not understood"),
-    ("t_s\tx_nm", r"line 1: position column 't_s\\tx_nm' not understood"),
+    ("t_s;x_nm", r"line 1: header 't_s;x_nm' separates its columns with semicolons"),
+    ("t_s\tx_nm", r"line 1: header 't_s\\tx_nm' separates its columns with tabs"),
     ('"t_s","x_nm"', r"line 1: header .* has columns"),
     ("x_nm,t_s", r"line 1: header 'x_nm,t_s' has columns"),
     ("t_ms,x_nm", r"line 1: header 't_ms,x_nm' has columns"),
