@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import chi2_sf
-from ._frames import _quantisation, _saturation, temporal_information
+from ._frames import histogram_checks, temporal_information
 
 # The unit-slip thresholds of ``Recording`` (blurtrap/data/_recording.py; a test holds them
 # equal): a batch row is checked like a Recording built from it.
@@ -93,8 +93,7 @@ def frame_status(rows: np.ndarray, first: int = 0) -> np.ndarray:
         u, counts = np.unique(y, return_counts=True)
         if u.size < 2:
             continue
-        for check in (_saturation, _quantisation):
-            msg, refused = check(y, u, counts, f"item {first + i}")
+        for msg, refused in histogram_checks(y, u, counts, f"item {first + i}"):
             if refused:
                 out[i] = "refused: " + msg
                 break

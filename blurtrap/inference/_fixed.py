@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import numbers
-from math import erfc
 from typing import Any
 
 import equinox as eqx
@@ -220,7 +219,9 @@ def _score_and_information(nll, args, value, scale, fisher_args):
             p[i] += s
             pts.append(p)
     pts = jnp.asarray(np.stack(pts))
-    g = np.asarray(_grad_fn(nll)(pts, args), dtype=float)[0]
+    # the exact gradient at ``value`` only (a batch of one: the points above are for the
+    # Whittle information, which is cheap; the exact likelihood's gradient may not be)
+    g = np.asarray(_grad_fn(nll)(pts[:1], args), dtype=float)[0]
     # the expected information: the Whittle Hessian with the periodogram replaced by the
     # model spectrum at ``value``, sum_f w_f grad log S_f grad log S_f^T (positive
     # semi-definite however far the held value is from the data's optimum)
@@ -302,7 +303,7 @@ def held_consistency_note(nll, args, value, scale, names, fixed: dict,
             continue
         z = float(-(hinv[-1] @ (basis.T @ g)) / math.sqrt(var))
         informative |= math.sqrt(var) < 0.5  # the data fix it to better than 50 %
-        p = float(erfc(abs(z) / math.sqrt(2.0)))
+        p = float(math.erfc(abs(z) / math.sqrt(2.0)))
         if np.all(value[u > 0] == 0):  # held at its bound 0: one-sided, only larger values
             p = 0.5 * p if z > 0 else 1.0
         if p * len(dirs) < HELD_TEST_ALPHA:  # Bonferroni over the directions tested

@@ -255,10 +255,8 @@ def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
         if u.size < 2:
             continue
         where = f"recording {i}" + (f" ({r.name})" if getattr(r, "name", None) else "")
-        for check in (_saturation, _quantisation):
-            msg, refused = check(y, u, counts, where)
-            if msg:
-                (errors if refused else notes).append(msg)
+        for msg, refused in histogram_checks(y, u, counts, where):
+            (errors if refused else notes).append(msg)
     if not drift_modelled:
         shift = mean_shift_sentence(recs, str(getattr(recs[0], "position_unit", "m")))
         if shift:
@@ -285,12 +283,21 @@ def _binomial_half_tail(c: int, n: int) -> float:
         float(0.5 * math.erfc((c - 0.5 - 0.5 * n) / math.sqrt(0.5 * n)))
 
 
-def _saturation(y, u, counts, where):
+def histogram_checks(y, u, counts, where) -> list[tuple[str, bool]]:
+    """``(message, refused)`` of the saturation and the quantisation check of the frames
+    ``y`` (``u, counts``: their distinct values), those that found something."""
+    step = _quantisation_step(u, y.size)
+    found = [_saturation(y, u, counts, where, step), _quantisation(y, u, where, step)]
+    return [(msg, refused) for msg, refused in found if msg]
+
+
+def _saturation(y, u, counts, where, step):
     """``(message, refused)`` on frames piled up at exactly the minimum or maximum value
-    (``('', False)`` without a pile-up); ``u, counts`` are the distinct values of ``y``."""
+    (``('', False)`` without a pile-up); ``u, counts`` are the distinct values of ``y``,
+    ``step`` their grid step (0: not on a grid)."""
     n = y.size
     piles = []
-    quantised = _quantisation_step(u, n) > 0
+    quantised = step > 0
     for side, j, jn in (("minimum", 0, 1), ("maximum", -1, -2)):
         c, cn = int(counts[j]), int(counts[jn])
         if c >= _SAT_MIN_FRAMES and c >= 2 * cn + 1 and (
@@ -314,11 +321,10 @@ def _saturation(y, u, counts, where):
     return msg + " - here too few frames to matter (fit kept)", False
 
 
-def _quantisation(y, u, counts, where):
+def _quantisation(y, u, where, q):
     """``(message, refused)`` on positions quantised in steps above std/4 (``('', False)``
-    otherwise); ``u`` are the distinct values of ``y``."""
+    otherwise); ``u`` are the distinct values of ``y``, ``q`` their grid step (0: none)."""
     sd = float(np.std(y))
-    q = _quantisation_step(u, y.size)
     if not (q > 0 and sd > 0 and q > _QUANT_NOTE_STEP * sd):
         return "", False
     added = q * q / 12.0

@@ -5,6 +5,7 @@ ineffective Fisher information, a fit that did not converge."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -58,14 +59,17 @@ def _no_temporal_information_message(recs, info):
     )
 
 
-def _slow_relaxation_hint(recs, values, names):
-    """A sentence when the fitted tau is not short compared with the record (else '')."""
+def _slow_relaxation_hint(recs, values, names, shift=None):
+    """A sentence when the fitted tau is not short compared with the record (else '');
+    ``shift``: a callable giving :func:`mean_shift_sentence` of ``recs`` (computed here
+    without it)."""
     if "gamma" not in names or "k" not in names:
         return ""
     tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
     dur = min(r.n_frames * float(r.frame_interval) for r in recs)
     if math.isfinite(tau) and tau > dur / 30.0:
-        if mean_shift_sentence(recs, _unit(recs)):  # named among the causes: the step/drift's doing
+        shifted = shift() if shift is not None else mean_shift_sentence(recs, _unit(recs))
+        if shifted:  # named among the causes: the step/drift's doing
             return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is the step or "
                     "drift read as a slow relaxation.")
         info = [temporal_information(r) for r in recs]
@@ -159,7 +163,7 @@ def _check_psd_blocks(res, recs, n_blocks, explicit):
     return res
 
 
-def _singular_fisher_causes(recs, values, names) -> str:
+def _singular_fisher_causes(recs, values, names, shift=None) -> str:
     """What the data say about why a fit failed: dt >> tau only when the frames (outliers
     clipped) really carry no temporal information; otherwise the outliers, steps or record
     length seen in the data, or a neutral list of possible causes."""
@@ -189,7 +193,7 @@ def _singular_fisher_causes(recs, values, names) -> str:
                       "record at several exposures")
     if out:
         causes.append(out)
-    shift = mean_shift_sentence(recs, _unit(recs))
+    shift = shift() if shift is not None else mean_shift_sentence(recs, _unit(recs))
     if shift:
         causes.append(shift)
     for i, r in enumerate(recs if not shift else ()):
@@ -234,7 +238,9 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=Non
     singular, in effect too (see :func:`_unidentified`), with the causes the frames show
     (and the held values, ``fixed``); with ``strict=False`` a singular information only
     adds a note."""
-    hint = _slow_relaxation_hint(recs, np.asarray(out.value), names) if recs else ""
+    # the step/drift sentence (segment FFTs of every record) once, and only where needed
+    shift = functools.cache(lambda: mean_shift_sentence(recs, _unit(recs)) if recs else "")
+    hint = _slow_relaxation_hint(recs, np.asarray(out.value), names, shift) if recs else ""
     hint += _held_sentence(fixed)
     if not bool(out.converged):
         seen = _outlier_sentence(recs) if recs else ""
@@ -252,7 +258,7 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=Non
                 notes.append(f"{method}: the Fisher information is singular (a parameter at "
                              "its bound or unidentifiable): standard errors are NaN" + hint)
             return
-        why = _singular_fisher_causes(recs, np.asarray(out.value), names)
+        why = _singular_fisher_causes(recs, np.asarray(out.value), names, shift)
         raise FitError(
             f"{method} fit: the Fisher information is singular - the parameters {names} are "
             f"not all identifiable from these data; {why}." + hint
@@ -262,7 +268,7 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=Non
         # with a nuisance parameter at its bound the information of the others is finite,
         # but an SE above the value itself carries no information (white frames, dt >> tau:
         # k 4.4 +- 86 pN/nm): refuse as for a singular information, naming the cause
-        why = _singular_fisher_causes(recs, np.asarray(out.value), names)
+        why = _singular_fisher_causes(recs, np.asarray(out.value), names, shift)
         raise FitError(
             f"{method} fit: the Fisher information is singular in effect - {lost} have "
             f"standard errors above their values and are not identifiable from these data; "
