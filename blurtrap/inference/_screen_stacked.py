@@ -17,7 +17,7 @@ objective is a :func:`jax.custom_jvp` whose tangent is the gradient's dot produc
 BFGS linearises and transposes it; tangents of the data are ignored: differentiable in the
 parameters only). So every record of up to ``capacity * CHUNK`` ordinates shares one
 compiled program per model, number of recordings and capacity (:data:`CAPACITIES`). The
-stack costs memory (``capacity x R x CHUNK x 6`` numbers: 12 MB per recording at 16
+stack costs memory (``capacity x R x CHUNK x 6`` numbers: 24 MB per recording at 32
 chunks) and the last trip's padding chunks time (at most ``GROUP - 1`` chunks per
 evaluation).
 """
@@ -37,11 +37,13 @@ from ._problems import SpectralArgs, SpectralObjective, _spectral_nll, spectral_
 
 #: the numbers of chunks a stack holds (each a multiple of :data:`GROUP`), smallest first: a
 #: record takes the smallest that fits its chunks, so one program per capacity serves every
-#: length up to it (16: 2^18 ordinates, 2^19 samples; 64: 2^21 samples; 256: 2^23 samples)
-#: and the stack's memory stays within 4x the record's (a single large capacity would cost
-#: every short record its memory); longer records keep BFGS on their padded ordinates
-#: (compiled per padded length)
-CAPACITIES = (16, 64, 256)
+#: length up to it (32: 2^19 ordinates, 2^20 samples; 128: 2^22 samples; 512: 2^24 samples)
+#: and the stack's memory stays within 4x the record's above the first capacity (a single
+#: large capacity would cost every short record its memory); longer records keep BFGS on
+#: their padded ordinates (compiled per padded length). The first was 16 chunks: a record
+#: of 2^20 samples then compiled again after shorter ones (4.9 s); at 32 it does not (warm
+#: diagnose at 2^18 samples +0.2 s; benchmarks/RESULTS.md, session 23)
+CAPACITIES = (32, 128, 512)
 #: chunks evaluated together in each trip of the loop (2 was faster than 1 and 4 at 2^15 and
 #: 2^17 ordinates)
 GROUP = 2
