@@ -119,7 +119,11 @@ def mean_shift(y) -> dict | None:
     if m < 32:
         return None
     seg = y[: m * n_seg].reshape(n_seg, m)
+    # each segment about its own straight line: a drift steep enough to dominate a segment
+    # (a 30-std ramp) would otherwise stretch the autocovariance past m/4 lags (no test)
+    t_seg = np.arange(m) - 0.5 * (m - 1)
     seg = seg - seg.mean(axis=1, keepdims=True)
+    seg = seg - np.outer(seg @ t_seg / float(t_seg @ t_seg), t_seg)
     # the correlation time: the first lag at which the autocovariance (median over segments,
     # by FFT) falls below 1/e of its lag-1 value (white tracking or detector noise sits at
     # lag 0 only, so lag 1 is the reference); none within m/4 lags: no test

@@ -107,7 +107,9 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
         tau = g / float(kk)
         if not (tau < dur / 3.0):
             informative, z = temporal_information(r)
-            if z < 0.5 * math.sqrt(r.n_frames):  # a freely diffusing bead has r1 ~ 1
+            # a freely diffusing bead has r1 ~ 1; a drift or step is not a lack of temporal
+            # information: named in the message below instead
+            if z < 0.5 * math.sqrt(r.n_frames) and not _shift_hint(recs):
                 raise FitError(f"{method} fit ran k to {float(kk):.3g} N/m, but the frames are "
                                "far less correlated than a freely diffusing bead's: "
                                + _no_temporal_information_message([r], [(informative, z)]))

@@ -220,6 +220,21 @@ def test_ramp_is_named_as_drift(camera):
             bt.calibrate(rec, method=method)
 
 
+@pytest.mark.parametrize("span", [20e-9, 1e-6])  # ~2 and ~100 x the frames' std (9 nm)
+def test_gentle_and_steep_ramps_are_named_and_the_named_remedy_works(camera, span):
+    # a 2-std ramp was blamed on "frames far less correlated than a freely diffusing
+    # bead's" (lag-1 correlation below the free-diffusion level); a ramp steep enough to
+    # dominate each of the 16 segments stretched the autocovariance past the test's lags
+    # and was not named at all
+    k, xs = camera
+    rec = bt.Recording(xs + np.linspace(0.0, span, xs.size), frame_interval=DT, exposure=1e-6)
+    with pytest.raises(FitError, match="not stationary \\(a drift\\)") as err:
+        bt.calibrate(rec)
+    assert "far less correlated" not in str(err.value)
+    fixed = bt.calibrate(rec, model="standard+drift")
+    assert abs(fixed.k - k) < 3 * fixed.k_err
+
+
 def test_stationary_frames_raise_no_mean_shift():
     from blurtrap.inference._frames import mean_shift
 
