@@ -223,14 +223,14 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     # saturated or coarsely quantised frames: refused here as by calibrate (the base fit
     # runs with strict=False, which would only note them)
     _inspect_frames(recs, strict=True)
-    # frames without temporal information (white noise, dt >> tau) cannot identify gamma
-    # from one exposure: refused here as by calibrate (the base fit would call the
-    # unidentifiable model adequate)
-    refuse_without_temporal_information(recs)
     settings = _common_settings(recs)
     mdl = get_model(model) if model is not None else default_model(settings)
     if add:
         mdl = mdl.add(*add)
+    # frames without temporal information (white noise, dt >> tau) cannot identify gamma
+    # from one exposure, nor with a known friction k apart from eps^2: refused here as by
+    # calibrate (the base fit would call the unidentifiable model adequate)
+    refuse_without_temporal_information(recs, noise=bool(mdl.noise))
     k, multi_power = _k_mode(recs, k)
     notes = []
     base = calibrate(recs, method="likelihood", likelihood="whittle", model=mdl, k=k,

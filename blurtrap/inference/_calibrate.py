@@ -23,7 +23,7 @@ from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
 from ._problems import make_layout
 from ._recordings import _bead_radii, _plausibility_notes, _stokes_notes, as_recordings
-from ._refusals import _check_psd_blocks, _no_temporal_information_message
+from ._refusals import _check_psd_blocks, _no_temporal_information_message, known_friction_message
 from ._result import CalibrationResult, FitError
 from ._starts import moment_start
 from ._variance_methods import _equipartition, _fit_allan, _fit_variance
@@ -235,13 +235,7 @@ def _auto_choice(recs, mdl, k, fixed, diffusion, pade, notes):
                      f"{best:.1f} standard errors above 0); joint likelihood")
     elif "gamma" in fixed:
         if mdl.noise and "tracking_var" not in fixed and n_exp < 2:
-            raise FitError(
-                f"the frames carry no temporal information (lag-1 correlation only "
-                f"{best:.1f} standard errors above 0: dt >> tau, W < dt): with gamma known, "
-                "k follows from the blurred variance var = kT/k S(W k/gamma) + eps^2 alone, "
-                "which cannot separate k from the tracking-error variance eps^2. Give it: "
-                "fixed={'tracking_var': eps2} in m^2 (0 when the tracking error is "
-                "negligible; CLI --fix tracking_var=NM2), or record at several exposures")
+            raise FitError(known_friction_message(best))
         notes.append(f"auto: frames carry little temporal information (lag-1 correlation "
                      f"{best:.1f} standard errors above 0: dt >> tau); gamma is held at the "
                      "given friction, so the joint likelihood gives k from the "

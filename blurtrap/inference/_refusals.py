@@ -21,23 +21,40 @@ from ._result import FitError
 from ._variance import empirical_variance_se
 
 
-def refuse_without_temporal_information(recs) -> None:
+def refuse_without_temporal_information(recs, noise: bool = True) -> None:
     """``FitError`` when no recording's frames carry temporal information and fewer than 3
-    exposures or laser powers identify gamma otherwise: the refusal of ``calibrate``'s
-    ``method="auto"`` (without a given friction or D), for callers that fit directly
-    (``diagnose``)."""
+    exposures or laser powers identify gamma otherwise, or, with the friction known from the
+    bead (``friction='stokes'``), one exposure cannot separate k from eps^2 (a model with
+    tracking noise, ``noise``): the refusals of ``calibrate``'s ``method="auto"``, for
+    callers that fit directly (``diagnose``)."""
     info = [temporal_information(r) for r in recs]
     if any(ok for ok, _ in info):
         return
     from ..data import instrument_settings
 
-    if any(instrument_settings(r)["friction"] == "stokes" for r in recs):
-        return  # the friction is known: calibrate fits k from the blurred variance
     n_exp = len({float(r.exposure) for r in recs})
+    if any(instrument_settings(r)["friction"] == "stokes" for r in recs):
+        # the friction is known: k follows from the blurred variance, but one exposure
+        # cannot separate it from eps^2 (calibrate's refusal; diagnose cannot hold eps^2)
+        if noise and n_exp < 2:
+            raise FitError(known_friction_message(max(z for _, z in info)) + "; diagnose "
+                           "has no held values: calibrate with tracking_var held instead")
+        return
     powers = [r.laser_power for r in recs]
     if n_exp >= 3 or (all(p is not None for p in powers) and len(set(powers)) >= 3):
         return
     raise FitError(_no_temporal_information_message(recs, info))
+
+
+def known_friction_message(best: float) -> str:
+    """Why frames without temporal information (lag-1 correlation ``best`` standard errors
+    above 0) and a known friction still do not give k from one exposure."""
+    return (f"the frames carry no temporal information (lag-1 correlation only {best:.1f} "
+            "standard errors above 0: dt >> tau, W < dt): with gamma known, k follows from "
+            "the blurred variance var = kT/k S(W k/gamma) + eps^2 alone, which cannot "
+            "separate k from the tracking-error variance eps^2. Give it: fixed={'tracking_var':"
+            " eps2} in m^2 (0 when the tracking error is negligible; CLI --fix "
+            "tracking_var=NM2), or record at several exposures")
 
 
 def _no_temporal_information_message(recs, info):

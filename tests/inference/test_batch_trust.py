@@ -213,3 +213,15 @@ def test_clipped_and_coarsely_quantised_rows_are_refused_like_calibrate():
     assert b.status[1].startswith("refused: item 1") and "saturated (clipped)" in b.status[1]
     assert b.status[2].startswith("refused: item 2") and "quantised in steps" in b.status[2]
     assert np.isnan(b.k[1]) and np.isnan(b.k[2])
+
+
+def test_refusals_number_items_across_the_whole_batch():
+    # rows are checked in blocks (16 on the host, 64 per fitted chunk): a refusal must name
+    # the item's index in the whole batch, not within its block (it was chunk-local)
+    x = ar1(K, 2048, 70, seed=6)
+    for i in (3, 67):
+        x[i] = np.minimum(x[i], 1.2 * float(np.std(x[i])))
+    b = bt.calibrate_batch(x, frame_interval=DT, exposure=W0)
+    for i in (3, 67):
+        assert b.status[i].startswith(f"refused: item {i} "), b.status[i]
+    assert sum(s.startswith("refused") for s in b.status) == 2
