@@ -12,6 +12,8 @@ Drift (progressive ideal high-pass and extrapolation to 0 Hz, appendix B) is in 
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -100,7 +102,15 @@ def _to_params(x, scale, a: VarianceArgs, profile_eps: bool):
     return jnp.concatenate([q, jnp.maximum(e, 0.0)[None]])
 
 
-@eqx.filter_jit
+#: the small jitted pieces the host loops below call thousands of times per fit (a
+#: Levenberg-Marquardt step, a profile point): jax.jit's dispatch is ~30 us against ~190 us
+#: for eqx.filter_jit with these arguments (VarianceArgs' static parts are static fields),
+#: and it takes numpy arguments without a jnp.asarray copy (variance_vs_exposure with its
+#: profile intervals on 4 recordings, warm: 3.9-4.4 s -> 2.7-3.0 s; benchmarks/RESULTS.md)
+_host_jit = functools.partial(jax.jit, static_argnames=("profile_eps",))
+
+
+@_host_jit
 def _resid_jac(x, scale, a: VarianceArgs, profile_eps: bool = True):
     def res(xx):
         return (a.v - _predicted(_to_params(xx, scale, a, profile_eps), a)) / a.se
@@ -108,25 +118,25 @@ def _resid_jac(x, scale, a: VarianceArgs, profile_eps: bool = True):
     return res(x), jax.jacfwd(res)(x)
 
 
-@eqx.filter_jit
+@_host_jit
 def _params(x, scale, a: VarianceArgs, profile_eps: bool = True):
     return _to_params(x, scale, a, profile_eps)
 
 
-@eqx.filter_jit
+@jax.jit
 def _fisher_p(p, a: VarianceArgs):
     """J^T J of the weighted residuals in SI parameters (eps^2 free)."""
     jac = jax.jacfwd(lambda q: (a.v - _predicted(q, a)) / a.se)(p)
     return jac.T @ jac
 
 
-@eqx.filter_jit
+@jax.jit
 def _chi2_many(ps, a: VarianceArgs):
     """chi^2 at each row of ``ps`` (SI parameters) with this pass's (fixed) weights."""
     return jax.vmap(lambda p: jnp.sum(((a.v - _predicted(p, a)) / a.se) ** 2))(ps)
 
 
-@eqx.filter_jit
+@jax.jit
 def _model_se(p, a: VarianceArgs):
     return _predicted_se(p, a)
 
@@ -149,7 +159,7 @@ def _solve_lsq(a: VarianceArgs, scale, x0, free, profile_eps=True, max_iter=300,
     Returns ``(x, chi2, converged)``."""
     x = np.asarray(x0, dtype=float).copy()
     free = np.asarray(free, dtype=bool)
-    r, jac = map(np.asarray, _resid_jac(jnp.asarray(x), scale, a, profile_eps))
+    r, jac = jax.device_get(_resid_jac(x, scale, a, profile_eps))
     chi2 = float(r @ r)
     dof = max(r.size - int(free.sum()), 0)
     lam = 1e-3
@@ -169,7 +179,7 @@ def _solve_lsq(a: VarianceArgs, scale, x0, free, profile_eps=True, max_iter=300,
             if d is not None:
                 xn = x.copy()
                 xn[free] += np.clip(d, -3.0, 3.0)  # at most a factor e^3 per step in a log scale
-                rn, jn = map(np.asarray, _resid_jac(jnp.asarray(xn), scale, a, profile_eps))
+                rn, jn = jax.device_get(_resid_jac(xn, scale, a, profile_eps))
                 cn = float(rn @ rn)
                 if np.isfinite(cn) and cn <= chi2:
                     x, r, jac, chi2, improved = xn, rn, jn, cn, True
