@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 
-__all__ = ["rd_from_drive", "drive_shape_of", "drive_shape_at", "drive_check"]
+__all__ = ["rd_from_drive", "drive_shape_of", "drive_shape_at", "drive_check",
+           "check_drive_response", "drive_phase_note"]
 
 
 def rd_from_drive(values, names, drive, model, shape=(1.0, None)):
@@ -92,3 +93,80 @@ def drive_check(res, plan):
         f"the trace ({z:+.1f} SE from 1" + ("): the position calibration and the drive "
                                             "disagree; check the units and the stage "
                                             "amplitude" if abs(z) > 3 else ")"),))
+
+
+#: the bead's response to the drive must stand this many standard errors above the thermal
+#: noise at f_d: below it Rd ~ 1/|x/x_stage| is dominated by noise and biased (|ratio| is
+#: biased up by ~(se/|ratio|)^2), and a drive that never reached the bead gives ~1-2 SE
+DRIVE_MIN_SNR = 5.0
+#: a phase of the response that differs from the model's by more than this many standard
+#: errors and more than this many radians (a few degrees: stage and position clocks a few
+#: samples apart, a detector's low-pass far above f_d) is named
+PHASE_Z, PHASE_MIN = 5.0, 0.05
+
+
+def check_drive_response(resp, i: int) -> None:
+    """``ValueError`` when recording ``i``'s response to the stage drive is not clearly above
+    the thermal noise (:data:`DRIVE_MIN_SNR`)."""
+    z = abs(resp.ratio) / resp.ratio_se if resp.ratio_se > 0 else math.inf
+    if z < DRIVE_MIN_SNR:
+        raise ValueError(
+            f"recording {i}: the bead's response to the stage drive at {resp.frequency:.6g} Hz "
+            f"is only {z:.2g} standard errors above the thermal noise there (|x/x_stage| = "
+            f"{abs(resp.ratio):.4g} +- {resp.ratio_se:.2g} per m; needed: > {DRIVE_MIN_SNR:g}): "
+            "the drive did not reach the bead (stage channel recorded from the function "
+            "generator, amplifier off, wrong channel) or its amplitude "
+            f"({resp.stage_amplitude * 1e9:.3g} nm) is too small for this record, and Rd from "
+            "it would be noise. Check the drive, raise its amplitude or record longer; or "
+            "calibrate without it (friction='stokes' with the bead radius)")
+
+
+def drive_phase_note(res, plan) -> str | None:
+    """A note when the phase of the drive response ``x/x_stage`` disagrees with the model's
+    (:mod:`._active`: ``arg[sinc(f_d W) e^{-i pi f_d W} H(f_d)]``, ``H`` at the fitted f_c):
+    an inverted detector (pi), a trace of the bead relative to the stage ((H - 1) x_s: then
+    Rd is wrong), or a timing offset between the stage and the positions. ``res`` in the
+    fit's units (volts or metres: Rd > 0 does not change the phase); None when it agrees."""
+    from ._active import fluid_response
+
+    if plan.drive is None or len(plan.drive) < 6:
+        return None
+    names = list(res.param_names)
+    values = np.asarray(res.values, float)
+    ik = next((i for i, n in enumerate(names) if n == "k" or n.startswith("k[")), None)
+    if ik is None or "gamma" not in names:
+        return None
+    ig = names.index("gamma")
+    k, gamma = values[ik], values[ig]
+    fc = k / (2.0 * math.pi * gamma)
+    grad = np.array([fc / k, -fc / gamma])
+    c = np.asarray(res.covariance, float)[np.ix_([ik, ig], [ik, ig])]
+    fc_se = math.sqrt(max(float(grad @ np.where(np.isfinite(c), c, 0.0) @ grad), 0.0))
+    mag, se, f_d, w = plan.drive[:4]
+    ratio = complex(plan.drive[5])
+    shape = drive_shape_at(plan, values, names) if plan.volts else drive_shape_of(plan, gamma)
+    h, _, darg = fluid_response(f_d, fc, *shape)
+    blur = np.sinc(f_d * w) * np.exp(-1j * math.pi * f_d * w)
+    mismatch = float(np.angle(ratio / (blur * h)))
+    m_se = math.hypot(se / mag, darg * fc_se)
+    slack = math.atan(f_d / values[names.index("f3db")]) if "f3db" in names else 0.0
+    if abs(mismatch) <= max(PHASE_Z * m_se, PHASE_MIN + slack):
+        return None
+    head = (f"drive: the phase of the bead's response at {f_d:.6g} Hz is {math.degrees(mismatch):+.1f}"
+            f" deg from the model's ({abs(mismatch) / m_se:.0f} SE)")
+    if abs(abs(mismatch) - math.pi) <= max(PHASE_Z * m_se, 0.3):
+        return (head + ": the response is inverted, the detector's axis points opposite to the "
+                "stage's. Rd is quoted as a magnitude: positions and forces from this "
+                "calibration have the opposite sign of the stage's axis")
+    relative = float(np.angle(ratio / (blur * (h - 1.0))))
+    if abs(relative) <= max(PHASE_Z * m_se, PHASE_MIN):
+        return (head + " and matches a trace of the bead relative to the stage, (H - 1) "
+                "x_stage, not relative to the trap. NOT TRUSTWORTHY: then Rd (and in metres k, "
+                f"gamma and Rf) is wrong, Rd by a factor {abs(h - 1.0) / abs(h):.3g}; record the "
+                "position relative to the trap (the detector's usual signal) or check the "
+                "drive geometry")
+    return (head + f": a timing offset of {abs(mismatch) / (2 * math.pi * f_d) * 1e3:.3g} ms "
+            "between the stage and the position samples (Rd unaffected), or a drive or "
+            "detector the model does not describe (a filter, the bead's hydrodynamics, a drive "
+            "that does not move the fluid as assumed: Rd biased); check the two clocks and "
+            "the drive")

@@ -32,7 +32,13 @@ import math
 
 import numpy as np
 
-from ._drive_fit import drive_check, drive_shape_at, rd_from_drive
+from ._drive_fit import (
+    check_drive_response,
+    drive_check,
+    drive_phase_note,
+    drive_shape_at,
+    rd_from_drive,
+)
 from ._models import TrapModel
 from ._options import frequency_ranges
 
@@ -169,7 +175,9 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
             resp = drive_response(x, np.asarray(stage, dtype=float), dt, float(r.exposure),
                                   frequency=f_d)
-            drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure), i)
+            check_drive_response(resp, i)
+            drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure), i,
+                     resp.ratio)
             notes.append(f"drive: response at {resp.frequency:.6g} Hz to the stage amplitude "
                          f"{resp.stage_amplitude * 1e9:.4g} nm: |x/x_stage| = "
                          f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} per m (active "
@@ -371,8 +379,11 @@ def _k_per_recording(res, names, base, cov):
 def finish_instrument(res, plan: Plan):
     """The reported result: volts turned into metres with Rd and Rf (module docstring); for
     a drive on a trace in metres, the drive's check of the position calibration."""
+    phase = drive_phase_note(res, plan)
     if plan.volts:
-        return _volts_result(res, plan)
-    if plan.drive is not None and "gamma" in res.param_names:
-        return drive_check(res, plan)
-    return res
+        out = _volts_result(res, plan)
+    elif plan.drive is not None and "gamma" in res.param_names:
+        out = drive_check(res, plan)
+    else:
+        out = res
+    return out if phase is None else dataclasses.replace(out, notes=out.notes + (phase,))

@@ -206,10 +206,13 @@ def test_drive_check_in_metres_agrees_with_the_hydrodynamic_response():
 def test_volts_active_plan_uses_the_beads_friction_for_inertia():
     """In volts the fitted gamma is in V units: the effect carries the bead's Stokes friction
     (its inertia and the drive response's added mass), and hydrodynamics=True is accepted."""
-    x = 1e-8 / RD * np.random.default_rng(0).standard_normal(4096)
     t = np.arange(4096) / FS
+    stage = 200e-9 * np.sin(2 * np.pi * 300.0 * t)
+    # white frames with a response to the drive (a drive that never reached the bead is
+    # refused: check_drive_response)
+    x = (1e-8 * np.random.default_rng(0).standard_normal(4096) + 0.5 * stage) / RD
     rec = bt.Recording(positions=x, frame_interval=1 / FS, exposure=1 / FS, temperature=T,
-                       stage=200e-9 * np.sin(2 * np.pi * 300.0 * t), position_unit="V",
+                       stage=stage, position_unit="V",
                        metadata=dict(detector="photodiode", anti_aliasing=True, bead_radius_m=R,
                                      viscosity_Pa_s=ETA, drive={"frequency_Hz": 300.0}))
     plan = prepare_instrument([rec], get_model(None), False, "auto", hydrodynamics=True)

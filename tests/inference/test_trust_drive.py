@@ -1,0 +1,105 @@
+"""Active calibration's drive response checked for what it can show is wrong (issue 18's
+class "a required check skipped"): a response not clearly above the thermal noise (a drive
+that never reached the bead, or one too small) is refused, and a response whose phase
+disagrees with the model's (an inverted detector, a trace of the bead relative to the
+stage, a timing offset between the stage and the positions) is named in a note.
+
+Data from numpy alone (not blurtrap's simulator): exact AR(1) frames of the trap at 100 kHz
+plus 2 nm white noise, and the bead's response to the stage drive ``Re[H(f_d) S e^{2 pi i
+f_d t}]`` with ``H = i f_d/(f_c + i f_d)`` (Tolic-Norrelykke et al. 2006, eq. 4), in volts
+through a detector of 200 nm/V.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+import blurtrap as bt
+
+KT = 1.380649e-23 * 295.0
+K = 5e-5
+GAMMA = 6 * math.pi * 9.5e-4 * 1.53e-6
+DT = 1e-5
+N = 65536
+RD = 2e-7  # m per V
+FD = 32.0
+FC = K / (2 * math.pi * GAMMA)
+H = 1j * FD / (FC + 1j * FD)
+T = np.arange(N) * DT
+
+
+def thermal(seed):
+    rng = np.random.default_rng(seed)
+    a = math.exp(-K * DT / GAMMA)
+    e = rng.standard_normal(N) * math.sqrt(KT / K)
+    e[1:] *= math.sqrt(1 - a * a)
+    return lfilter([1.0], [1.0, -a], e) + 2e-9 * rng.standard_normal(N)
+
+
+def drive(amplitude, delay=0.0):
+    """The stage (sampled ``delay`` s late) and the complex stage sinusoid at the bead."""
+    s = amplitude * np.exp(0.3j) * np.exp(2j * math.pi * FD * T)
+    stage = np.real(amplitude * np.exp(0.3j) * np.exp(2j * math.pi * FD * (T - delay)))
+    return stage, s
+
+
+def calibrate(volts, stage):
+    rec = bt.Recording(volts, frame_interval=DT, exposure=1e-9 * DT, temperature=295.0,
+                       stage=stage, position_unit="V",
+                       metadata={"drive": {"frequency_Hz": FD}, "detector": "photodiode"})
+    return bt.calibrate(rec)
+
+
+def phase_notes(res):
+    return [s for s in res.notes if s.startswith("drive: the phase")]
+
+
+@pytest.mark.parametrize("amplitude, at_bead", [(150e-9, 0.0), (1e-9, 1.0)],
+                         ids=["drive never reached the bead", "1 nm drive"])
+def test_a_response_within_the_noise_is_refused(amplitude, at_bead):
+    # k came back 280 SE low (drive absent) or 90x high (1 nm) with no note: Rd ~ 1/|x/x_s|
+    # from a response of 1-2 SE
+    stage, s = drive(amplitude)
+    volts = (thermal(4) + at_bead * np.real(H * s)) / RD
+    with pytest.raises(ValueError, match="did not reach the bead .* too small"):
+        calibrate(volts, stage)
+
+
+def test_correct_drives_give_rd_within_errors_and_no_phase_note():
+    stage, s = drive(150e-9)
+    for seed in (10, 11, 12):
+        res = calibrate((thermal(seed) + np.real(H * s)) / RD, stage)
+        rd = res["displacement_sensitivity"]
+        assert abs(rd.value - RD) < 3 * rd.error
+        assert not phase_notes(res), phase_notes(res)
+
+
+def test_a_trace_relative_to_the_stage_is_named():
+    # (H - 1) x_s: Rd 186 SE low, k 8 SE high, no note before
+    stage, s = drive(150e-9)
+    res = calibrate((thermal(5) + np.real((H - 1) * s)) / RD, stage)
+    (note,) = phase_notes(res)
+    assert "relative to the stage" in note and "NOT TRUSTWORTHY" in note
+    factor = float(note.split("Rd by a factor ")[1].split(";")[0])
+    assert factor == pytest.approx(abs(H - 1) / abs(H), rel=0.1)  # ~ f_c / f_d
+
+
+def test_an_inverted_detector_is_named():
+    # bit-identical results to the right sign before
+    stage, s = drive(150e-9)
+    res = calibrate(-(thermal(6) + np.real(H * s)) / RD, stage)
+    (note,) = phase_notes(res)
+    assert "inverted" in note
+
+
+def test_a_late_stage_clock_is_named_with_its_delay():
+    stage, s = drive(150e-9, delay=1e-3)  # 11.5 deg at 32 Hz
+    res = calibrate((thermal(6) + np.real(H * s)) / RD, stage)
+    (note,) = phase_notes(res)
+    delay_ms = float(note.split("timing offset of ")[1].split(" ms")[0])
+    # the measured phase has an SE of ~2 deg here (0.17 ms)
+    assert abs(delay_ms - 1.0) < 0.5
+    rd = res["displacement_sensitivity"]
+    assert abs(rd.value - RD) < 3 * rd.error  # a delay does not change |x/x_s|
