@@ -267,9 +267,12 @@ def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
             notes.append(shift[0].upper() + shift[1:])
     if errors:
         if strict:
-            raise ValueError("; ".join(errors) + ". Crop the saturated stretches, fix the "
-                             "detector range/resolution or the duplicate; strict=False fits "
-                             "anyway (with a note; the result is then biased).")
+            # (the duplicate's own message says what to do)
+            detector = any("identical positions" not in e for e in errors)
+            raise ValueError("; ".join(errors) + (
+                ". Crop the saturated stretches or fix the detector range/resolution"
+                if detector else "") + "; strict=False fits anyway (with a note; the result "
+                "is then biased).")
         notes = [f"NOT TRUSTWORTHY (strict=False): {e}" for e in errors] + notes
     return notes
 

@@ -66,16 +66,18 @@ _POOL_ALPHA = 1e-3
 
 
 def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
-    """A note when recordings that share one k (no laser powers, or equal ones) do not fit
-    it: the joint goodness of fit and two or more of the sharing recordings' own binned
+    """A note when recordings that share one k (no laser powers, or equal ones; or c in
+    k = c P) do not fit it: the joint goodness of fit and two or more of the sharing recordings' own binned
     tests fail, some above the joint spectrum at low frequency and some below. Recordings of
     different stiffness (another power, bead or height) pooled
     into one k give a k between theirs with errors far too small; the note names which
     lie above the joint spectrum at low frequency (softer: S(0) ~ gamma/k^2) and which
     below."""
-    if not gof_p < _POOL_ALPHA or layout.linear_power:
+    if not gof_p < _POOL_ALPHA:
         return None
-    idx = np.asarray(layout.k_index)
+    # k = c P: every recording shares c, and a power offset or heating puts the weak-power
+    # recordings on one side of the joint spectrum and the strong ones on the other
+    idx = np.zeros(np.shape(ratio)[0], int) if layout.linear_power else np.asarray(layout.k_index)
     ratio, weight = np.asarray(ratio), np.asarray(weight)
     bad = []
     for g in np.unique(idx):
@@ -93,8 +95,14 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
     if len(bad) < 2 or not (min(levels) < 1.0 < max(levels)):
         return None  # all on one side: a shared misfit (the model), not a pooling
     shown = "; ".join(f"recording {i}: p = {p:.2g}, low-frequency power {lv:.2g} x the joint "
-                      f"fit ({'softer' if lv > 1 else 'stiffer'} than {lab})"
-                      for i, p, lv, lab in bad)
+                      f"fit ({'softer' if lv > 1 else 'stiffer'} than "
+                      f"{'c P' if layout.linear_power else lab})" for i, p, lv, lab in bad)
+    if layout.linear_power:
+        return (f"k = c P does not fit these recordings (joint goodness of fit p = {gof_p:.2g}; "
+                f"{shown}): the stiffness is not proportional to the laser power (an offset, "
+                "k = c (P - P0), or heating), and c, gamma and their errors are biased. Fit "
+                "k='per_power' and compare, or diagnose the series (power_offset, "
+                "laser_heating)")
     return (f"recordings sharing one stiffness do not fit it (joint goodness of fit p = "
             f"{gof_p:.2g}; {shown}): recordings of different stiffness (another laser power, "
             "bead or height) pooled into one k give a k between theirs with errors far too "

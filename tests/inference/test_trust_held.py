@@ -279,6 +279,22 @@ def test_pooling_recordings_of_different_stiffness_is_noted():
     assert not any("sharing one stiffness" in s for s in fit(a, c).notes)
 
 
+def test_stiffness_not_proportional_to_power_is_noted_under_linear_power():
+    # k = c (P - 30 mW) fitted as k = c P: gamma 4 SE off and k per power 20 SE off with no
+    # note before; with k = c P itself no note
+    g, powers = 1.88e-8, (0.05, 0.1, 0.15, 0.2)
+
+    def fit(offset):
+        recs = [bt.Recording(circulant_frames(5e-4 * (p - offset), g, 1e-6, DT, EPS2, 16384,
+                                              seed=40 + i), frame_interval=DT, exposure=1e-6,
+                             laser_power=p) for i, p in enumerate(powers)]
+        return bt.calibrate(recs, k="linear_power")
+
+    (note,) = [s for s in fit(0.03).notes if "k = c P does not fit" in s]
+    assert "recording 0" in note and "softer than c P" in note and "per_power" in note
+    assert not any("k = c P does not fit" in s for s in fit(0.0).notes)
+
+
 def test_a_misfit_shared_by_all_recordings_is_not_called_pooling():
     # both recordings below the joint spectrum at low frequency and above it elsewhere (a
     # model misfit they share): no pooling note; one above and one below: the note
