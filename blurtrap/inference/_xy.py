@@ -216,6 +216,35 @@ def _angle_stats(k1, k2, gamma, eps2, xy: XYRecording, l1, l2):
     return phi_err, z
 
 
+#: the principal-axis motions count as coupled when a lag-1 cross-covariance exceeds this
+#: many standard errors (two lags tested: a false note in ~1e-5 of fits)
+COUPLING_Z = 4.5
+
+
+def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
+    """A note when the traces along the principal axes are correlated at lag +-1: in the
+    model the two axes are independent OU sequences (one isotropic friction), so their
+    sample cross-covariance at any lag has mean 0 and variance ``(1/N) sum_n C1(n) C2(n)``
+    (as ``c12`` at lag 0, :func:`_angle_stats`). Unequal detector sensitivities along x and
+    y, cross-talk between the channels or an anisotropic friction couple them."""
+    n = xy.n_frames
+    a0, a1, ra = _autocov(k1, gamma, eps2, xy)
+    b0, b1, rb = _autocov(k2, gamma, eps2, xy)
+    se = math.sqrt((a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb)) / n)
+    x = np.asarray(u.positions, float) - float(np.mean(u.positions))
+    y = np.asarray(v.positions, float) - float(np.mean(v.positions))
+    z = [float(np.mean(x[1:] * y[:-1])) / se, float(np.mean(y[1:] * x[:-1])) / se]
+    if not (se > 0 and max(abs(t) for t in z) > COUPLING_Z):
+        return None
+    return (f"the motions along the two principal axes are correlated at lag 1 ({z[0]:+.1f} and "
+            f"{z[1]:+.1f} standard errors), which a trap with one isotropic friction cannot "
+            "produce: unequal x and y detector sensitivities (a per-axis gain; the positions "
+            "must be in one length unit on both axes), cross-talk between the channels, or an "
+            "anisotropic friction (a non-spherical particle, a nearby wall) couple them, and "
+            "k1, k2, gamma and phi are then biased. Calibrate each axis's sensitivity "
+            "separately, or fit x and y alone")
+
+
 def _whittle_information(k, gamma, eps2, xy: XYRecording, noise: bool) -> np.ndarray:
     """Expected (Whittle) Fisher information of one axis's frames for (k, gamma[, eps2]):
     ``sum_f d log P d log P^T`` over the positive Fourier frequencies of N frames; the
@@ -319,6 +348,9 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
     cov3[2, 2] = phi_err**2 if math.isfinite(phi_err) else 0.0
     (kxx, kyy, kxy), (exx, eyy, exy) = _tensor(k1, k2, phi, cov3)
     notes = []
+    coupled = _coupling_note(u, v, k1, k2, gamma, eps2, xy) if "gamma" in names else None
+    if coupled:
+        notes.append(coupled)
     resolved = z > RESOLVE_Z
     if not resolved:
         notes.append(f"principal axes not resolved: the gap between the frame variances along "

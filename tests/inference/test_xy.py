@@ -122,3 +122,31 @@ def test_calibrate_points_xy_recordings_to_calibrate_xy():
     for data in (xy, [xy]):
         with pytest.raises(TypeError, match="calibrate_xy"):
             bt.calibrate(data)
+
+
+def test_unequal_axis_sensitivities_are_named():
+    # y recorded with 1.3x the x sensitivity (one Rd used for both axes of a QPD): k1, k2,
+    # gamma and phi came back 14-55 SE off with no note; the principal-axis motions are then
+    # correlated at lag 1, which one isotropic friction cannot produce. Numpy AR(1) axes.
+    from scipy.signal import lfilter
+
+    kt, g, dt, n, phi = 1.380649e-23 * 295.0, 6 * math.pi * 9.5e-4 * 1.53e-6, 1 / 1500, 16384, 0.5
+
+    def ou(k, rng):
+        a = math.exp(-k * dt / g)
+        e = rng.standard_normal(n) * math.sqrt(kt / k)
+        e[1:] *= math.sqrt(1 - a * a)
+        return lfilter([1.0], [1.0, -a], e)
+
+    def coupled_notes(seed, gain):
+        rng = np.random.default_rng(seed)
+        u, v = ou(2e-5, rng), ou(5e-5, rng)
+        x = math.cos(phi) * u - math.sin(phi) * v + 2e-9 * rng.standard_normal(n)
+        y = math.sin(phi) * u + math.cos(phi) * v + 2e-9 * rng.standard_normal(n)
+        res = bt.calibrate_xy(bt.xy_from_arrays(x, gain * y, frame_interval=dt,
+                                                exposure=1e-9 * dt, temperature=295.0),
+                              separate=False)
+        return [s for s in res.notes if "correlated at lag 1" in s]
+
+    assert coupled_notes(33, 1.3)
+    assert not any(coupled_notes(s, 1.0) for s in (34, 35, 36))
