@@ -236,6 +236,23 @@ def _singular_fisher_causes(recs, values, names, shift=None) -> str:
     return "what the frames show: " + "; ".join(causes)
 
 
+def _effect_parameters_hint(out, names, fixed) -> str:
+    """Names the free parameters of effects in a fit that did not converge, with their
+    values at the stop: an effect the data do not show (a detector filter on a trace without
+    one) leaves its parameters undetermined, and the fit wanders along them."""
+    core = ("k", "c", "gamma", "tracking_var")
+    value = np.asarray(out.value, dtype=float)
+    extra = [(n, v) for n, v in zip(names, value)
+             if n.split("[")[0] not in core and n not in (fixed or {})]
+    if not extra:
+        return ""
+    shown = ", ".join(f"{n} = {v:.4g}" for n, v in extra)
+    return (f"The model's effect parameters ended at {shown}: an effect the data do not show "
+            "(e.g. a detector filter on a trace without one, diode_filter='fit') leaves its "
+            "parameters undetermined and the fit wanders along them; fit without that effect "
+            "(diagnose says which the data need) or hold its parameters (fixed=...).")
+
+
 def _held_sentence(fixed) -> str:
     """Names the held values in a refusal: a wrong one (value or unit) makes fits fail too."""
     if not fixed:
@@ -263,12 +280,13 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=Non
     hint += _held_sentence(fixed)
     if not bool(out.converged):
         seen = _outlier_sentence(recs) if recs else ""
+        effects = _effect_parameters_hint(out, names, fixed)
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
             f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
-            + (f"The frames show {seen}." if seen else
-               "Try another method or check the data (outliers, drift, wrong exposure/frame "
-               "interval).")
+            + " ".join(t for t in (f"The frames show {seen}." if seen else "", effects) if t)
+            + ("" if seen or effects else "Try another method or check the data (outliers, "
+               "drift, wrong exposure/frame interval).")
             + hint
         )
     if not bool(out.hessian_pd):

@@ -62,7 +62,14 @@ def _fit_variance(recs, layout, model, method_name, notes):
     scale = _start_vector(recs, layout, model.noise)
     p, cov, chi2, ok, pd, fitted = fit_variances(args, scale)
     if not bool(ok):
-        raise FitError(f"{method_name}: least squares did not converge; parameters {layout.names}")
+        raise FitError(
+            f"{method_name}: least squares did not converge; parameters {layout.names}"
+            + (". With k = c P, a stiffness not proportional to the power (an offset, k = c (P - "
+               "P0), or heating) has no good fit: fit k='per_power' with "
+               "method='likelihood', or diagnose the series" if layout.linear_power else
+               ". The variances may not follow the model (check each recording's own fit), "
+               "or the data do not determine these parameters: method='likelihood' uses "
+               "all the frames"))
     if not bool(pd):
         raise FitError(
             f"{method_name}: parameters {layout.names} are not identifiable from these "

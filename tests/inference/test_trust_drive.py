@@ -103,3 +103,18 @@ def test_a_late_stage_clock_is_named_with_its_delay():
     assert abs(delay_ms - 1.0) < 0.5
     rd = res["displacement_sensitivity"]
     assert abs(rd.value - RD) < 3 * rd.error  # a delay does not change |x/x_s|
+
+
+def test_an_effect_the_data_do_not_show_is_named_when_the_fit_wanders():
+    # diode_filter='fit' on a photodiode trace without a filter: the fit did not converge
+    # and the message blamed outliers, drift or a wrong exposure
+    from blurtrap.inference import FitError
+
+    rec = bt.Recording(thermal(12), frame_interval=DT, exposure=1e-9 * DT, temperature=295.0,
+                       metadata={"detector": "photodiode", "diode_filter": "fit"})
+    with pytest.raises(FitError) as err:
+        bt.calibrate(rec)
+    msg = str(err.value)
+    assert "f3db = " in msg and "diode_alpha = " in msg
+    assert "detector filter on a trace without one" in msg
+    assert "outliers, drift" not in msg
