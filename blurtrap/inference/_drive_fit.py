@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 __all__ = ["rd_from_drive", "drive_shape_of", "drive_shape_at", "drive_check",
-           "check_drive_response", "drive_phase_note"]
+           "check_drive_frequency", "check_drive_response", "drive_phase_note"]
 
 
 def rd_from_drive(values, names, drive, model, shape=(1.0, None)):
@@ -103,6 +103,26 @@ DRIVE_MIN_SNR = 5.0
 #: errors and more than this many radians (a few degrees: stage and position clocks a few
 #: samples apart, a detector's low-pass far above f_d) is named
 PHASE_Z, PHASE_MIN = 5.0, 0.05
+
+
+#: a declared drive frequency off the stage's own by more than this many of its standard
+#: errors and this fraction is refused (a typo, kHz given as Hz; off by a fraction of a bin
+#: it still biases both sinusoid fits)
+FREQ_Z, FREQ_REL = 5.0, 1e-3
+
+
+def check_drive_frequency(found, declared: float, i: int) -> None:
+    """``ValueError`` when the stage's own drive frequency (``found``: a
+    :class:`._active.DriveResponse` with the frequency estimated from the stage) is not the
+    declared one."""
+    off = abs(found.frequency - float(declared))
+    if off > max(FREQ_Z * found.frequency_se, FREQ_REL * float(declared)):
+        raise ValueError(
+            f"recording {i}: the drive is declared at {float(declared):.6g} Hz but the stage "
+            f"moves at {found.frequency:.6g} +- {found.frequency_se:.2g} Hz (its largest "
+            "periodogram peak, refined by least squares): a typo or a unit slip (kHz as Hz)? "
+            f"Declare drive frequency_Hz = {found.frequency:.6g}; a response fitted at the "
+            "wrong frequency biases Rd")
 
 
 def check_drive_response(resp, i: int) -> None:

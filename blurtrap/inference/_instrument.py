@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from ._drive_fit import (
+    check_drive_frequency,
     check_drive_response,
     drive_check,
     drive_phase_note,
@@ -173,8 +174,9 @@ def _clean_lines(recs, sts, lines, notes, excluded):
                                  "not supported yet: calibrate each driven recording alone")
             from ._active import drive_response
 
-            resp = drive_response(x, np.asarray(stage, dtype=float), dt, float(r.exposure),
-                                  frequency=f_d)
+            stage = np.asarray(stage, dtype=float)
+            resp = drive_response(x, stage, dt, float(r.exposure), frequency=f_d)
+            check_drive_frequency(drive_response(x, stage, dt, float(r.exposure)), f_d, i)
             check_drive_response(resp, i)
             drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure), i,
                      resp.ratio)

@@ -118,3 +118,16 @@ def test_an_effect_the_data_do_not_show_is_named_when_the_fit_wanders():
     assert "f3db = " in msg and "diode_alpha = " in msg
     assert "detector filter on a trace without one" in msg
     assert "outliers, drift" not in msg
+
+
+@pytest.mark.parametrize("declared", [31.0, 32000.0], ids=["typo", "kHz as Hz"])
+def test_a_declared_frequency_the_stage_does_not_show_is_refused(declared):
+    # 31 Hz for a 32 Hz drive biased Rd by 2.4 SE with no note; 32000 Hz passed the stage
+    # check on a noiseless stage
+    stage, s = drive(150e-9)
+    volts = (thermal(7) + np.real(H * s)) / RD
+    rec = bt.Recording(volts, frame_interval=DT, exposure=1e-9 * DT, temperature=295.0,
+                       stage=stage, position_unit="V",
+                       metadata={"drive": {"frequency_Hz": declared}, "detector": "photodiode"})
+    with pytest.raises(ValueError, match=r"declared at .* but the stage moves at 32 "):
+        bt.calibrate(rec)
