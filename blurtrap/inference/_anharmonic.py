@@ -65,7 +65,9 @@ class AnharmonicResult:
     """Result of :func:`calibrate_anharmonic` (SI units).
 
     ``k`` [N/m] is the harmonic coefficient (small-amplitude stiffness), ``k4`` [N/m^3],
-    ``gamma`` [N s/m], ``tracking_var`` = eps^2 [m^2], each with ``*_err``; ``beta`` =
+    ``gamma`` [N s/m], ``tracking_var`` = eps^2 [m^2] (the unconstrained moment estimate:
+    below 0 within its error when the tracking noise is small; a note says so), each with
+    ``*_err``; ``beta`` =
     k4 kT/k^2 (dimensionless); ``covariance`` in the order ``("k", "k4", "gamma",
     "tracking_var")``; ``gof`` the J test; ``lags`` and ``bandwidth`` as used."""
 
@@ -324,6 +326,14 @@ def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, 
     if beta < 0:
         notes.append("k4 < 0: a quartic term that does not confine (continued by a sextic "
                      "term); consistent with a harmonic trap if |k4| < 2 SE")
+    if e2 < 0:
+        # unconstrained, as a moment estimate is (clipping it at 0 would bias it up)
+        z = e2 * s**2 / float(err[3]) if err[3] > 0 else -math.inf
+        notes.append(f"eps^2 < 0 ({z:.2g} SE): the moment estimate is not held at its bound "
+                     "(unlike calibrate's likelihood fits); "
+                     + ("consistent with no tracking noise within its error" if z > -2 else
+                        "a significantly negative eps^2 means the moments do not follow this "
+                        "model (a detector filter, wrong exposure or frame interval)"))
     return AnharmonicResult(
         k=k, k_err=float(err[0]), k4=beta * k * k / kt, k4_err=float(err[1]), gamma=gamma,
         gamma_err=float(err[2]), tracking_var=e2 * s**2, tracking_var_err=float(err[3]),
