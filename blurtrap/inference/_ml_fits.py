@@ -12,7 +12,7 @@ import numpy as np
 
 from .._config import float64_scope
 from ._assemble import _assemble, _interval_source, _k_mode_of
-from ._fit import fit_ml, fit_ml_fd_newton
+from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton
 from ._fixed import expand as expand_fixed
 from ._fixed import held_consistency_note, reduced_objective
 from ._fixed import propagate as propagate_fixed
@@ -41,7 +41,8 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                                         method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
-    pooled = shared_k_note(layout, args.power / psd, args.weight, gof["p_value"])
+    pooled = (shared_k_note(layout, args.power / psd, args.weight, gof["p_value"])
+              or power_law_note(recs, layout, model, args, out.nll, gof["p_value"], fixed))
     if pooled:
         notes = [*notes, pooled]
     if fixed:
@@ -66,18 +67,16 @@ _POOL_ALPHA = 1e-3
 
 
 def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
-    """A note when recordings that share one k (no laser powers, or equal ones; or c in
-    k = c P) do not fit it: the joint goodness of fit and two or more of the sharing recordings' own binned
+    """A note when recordings that share one k (no laser powers, or equal ones) do not fit
+    it: the joint goodness of fit and two or more of the sharing recordings' own binned
     tests fail, some above the joint spectrum at low frequency and some below. Recordings of
     different stiffness (another power, bead or height) pooled
     into one k give a k between theirs with errors far too small; the note names which
     lie above the joint spectrum at low frequency (softer: S(0) ~ gamma/k^2) and which
     below."""
-    if not gof_p < _POOL_ALPHA:
-        return None
-    # k = c P: every recording shares c, and a power offset or heating puts the weak-power
-    # recordings on one side of the joint spectrum and the strong ones on the other
-    idx = np.zeros(np.shape(ratio)[0], int) if layout.linear_power else np.asarray(layout.k_index)
+    if not gof_p < _POOL_ALPHA or layout.linear_power:
+        return None  # k = c P: power_law_note
+    idx = np.asarray(layout.k_index)
     ratio, weight = np.asarray(ratio), np.asarray(weight)
     bad = []
     for g in np.unique(idx):
@@ -95,18 +94,43 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
     if len(bad) < 2 or not (min(levels) < 1.0 < max(levels)):
         return None  # all on one side: a shared misfit (the model), not a pooling
     shown = "; ".join(f"recording {i}: p = {p:.2g}, low-frequency power {lv:.2g} x the joint "
-                      f"fit ({'softer' if lv > 1 else 'stiffer'} than "
-                      f"{'c P' if layout.linear_power else lab})" for i, p, lv, lab in bad)
-    if layout.linear_power:
-        return (f"k = c P does not fit these recordings (joint goodness of fit p = {gof_p:.2g}; "
-                f"{shown}): the stiffness is not proportional to the laser power (an offset, "
-                "k = c (P - P0), or heating), and c, gamma and their errors are biased. Fit "
-                "k='per_power' and compare, or diagnose the series (power_offset, "
-                "laser_heating)")
+                      f"fit ({'softer' if lv > 1 else 'stiffer'} than {lab})"
+                      for i, p, lv, lab in bad)
     return (f"recordings sharing one stiffness do not fit it (joint goodness of fit p = "
             f"{gof_p:.2g}; {shown}): recordings of different stiffness (another laser power, "
             "bead or height) pooled into one k give a k between theirs with errors far too "
             "small. Give each recording's laser_power, or fit k='per_recording'")
+
+
+def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | None:
+    """With ``k = c P`` (``k='linear_power'``) and a failing joint goodness of fit: a
+    likelihood-ratio test against one k per power (the same Whittle objective on the same
+    ordinates, one more fit); a note when k is not proportional to P (an offset ``k = c (P -
+    P0)``, heating), naming the per-power stiffnesses."""
+    if not (layout.linear_power and gof_p < _POOL_ALPHA) or (fixed and "c" in fixed):
+        return None
+    alt = make_layout(recs, "per_power", layout.noise, layout.extra_names)
+    if alt.n_k < 2:
+        return None
+    alt_args = eqx.tree_at(lambda a: a.layout, args, alt)
+    out, _ = _fit_held(fit_ml, spectral_nll, _start_vector(recs, alt, model.noise), alt_args,
+                       alt.names, fixed)
+    if not bool(out.converged):
+        return None
+    lr = 2.0 * (float(nll_value) - float(out.nll))
+    dof = alt.n_k - 1
+    p = float(chi2_sf(max(lr, 0.0), dof))
+    if not p < _POOL_ALPHA:
+        return None
+    metres = str(getattr(recs[0], "position_unit", "m")) == "m"
+    ks = ", ".join(f"{lab}: {float(v) * 1e3:.4g}" for lab, v in
+                   zip(alt.k_labels, np.asarray(out.value)[: alt.n_k]))
+    return (f"k = c P does not fit these recordings: one k per power fits better by a "
+            f"likelihood ratio of {lr:.4g} ({dof} dof, p = {p:.2g}; joint goodness of fit p = "
+            f"{gof_p:.2g})" + (f", with k [pN/nm] {ks}" if metres else "")
+            + ". The stiffness is not proportional to the laser power (an offset, k = c (P - "
+            "P0), or heating), and c, gamma and their errors are biased: fit k='per_power', or "
+            "diagnose the series (power_offset, laser_heating)")
 
 
 #: robust spectral fit: an ordinate whose Gamma upper tail probability under the fit is below
@@ -206,6 +230,8 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
     pooled = shared_k_note(layout, sargs.power / psd, sargs.weight, gof["p_value"])
+    if not pooled and bool(wout.success):  # k = c P: tested on the Whittle objective
+        pooled = power_law_note(recs, layout, model, sargs, wout.nll, gof["p_value"], fixed)
     if pooled:
         notes = [*notes, pooled]
     if fixed:
