@@ -13,6 +13,10 @@ from ..effects import QUANTITIES
 
 #: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
 Z95 = 1.959963984540054
+#: parameters that are positive by construction (their Wald interval is taken on log scale
+#: where it would reach below 0)
+_POSITIVE = ("k", "c", "gamma", "displacement_sensitivity", "force_sensitivity",
+             "hydro_radius", "f3db")
 
 #: lab units (reports, plots, CLI): name -> (factor from SI, lab unit), from the one table
 #: of quantities in :mod:`blurtrap.effects`
@@ -169,10 +173,17 @@ class CalibrationResult:
         half = Z95 * self.errors
         ivs = {n: (float(v - h), float(v + h))
                for n, v, h in zip(self.param_names, self.values, half, strict=True)}
+        kinds = {n: "wald" for n in ivs}
+        for n, v, h in zip(self.param_names, self.values, half, strict=True):
+            # a positive quantity whose Wald interval reaches below 0 (a large relative
+            # error): the same delta-method error on log scale, which stays positive
+            if n.split("[")[0] in _POSITIVE and v > 0 and v - h < 0:
+                ivs[n] = (float(v * math.exp(-h / v)), float(v * math.exp(h / v)))
+                kinds[n] = "log-wald"
         for n in self.at_bounds:
             if n in ivs:
                 ivs[n] = (0.0, math.nan)
-        return ivs, {n: "wald" for n in ivs}
+        return ivs, kinds
 
     def _interval_table(self):
         if self._interval_cache is None:
@@ -194,7 +205,9 @@ class CalibrationResult:
 
     @property
     def interval_kinds(self) -> dict[str, str]:
-        """How each interval of :attr:`intervals` was made: ``"wald"`` or ``"profile"``."""
+        """How each interval of :attr:`intervals` was made: ``"wald"``, ``"profile"``, or
+        ``"log-wald"`` (a positive parameter whose Wald interval would reach below 0 where
+        no profile is available: ``value exp(+-1.96 SE/value)``)."""
         return dict(self._interval_table()[1])
 
     @property

@@ -131,3 +131,26 @@ def test_a_declared_frequency_the_stage_does_not_show_is_refused(declared):
                        metadata={"drive": {"frequency_Hz": declared}, "detector": "photodiode"})
     with pytest.raises(ValueError, match=r"declared at .* but the stage moves at 32 "):
         bt.calibrate(rec)
+
+
+def test_wald_intervals_of_positive_parameters_stay_positive():
+    # where no profile interval is available (results in volts, interval_source None), a k
+    # or gamma with an SE above half its value had a Wald interval reaching below 0 (the CLI
+    # printed negative stiffnesses); it is taken on log scale there, same SE
+    import dataclasses
+
+    dt = 1 / 1500
+    rng = np.random.default_rng(3)
+    a = math.exp(-K * dt / GAMMA)
+    e = rng.standard_normal(8192) * math.sqrt(KT / K)
+    e[1:] *= math.sqrt(1 - a * a)
+    res = bt.calibrate(bt.Recording(lfilter([1.0], [1.0, -a], e), frame_interval=dt,
+                                    exposure=1e-9 * dt), model="blur")
+    wide = dataclasses.replace(res, covariance=np.asarray(res.covariance) * (
+        (0.8 * res.k / res.k_err) ** 2), interval_source=None)
+    lo, hi = wide.intervals["k"]
+    assert wide.interval_kinds["k"] == "log-wald" and lo > 0
+    assert lo * hi == pytest.approx(wide.k**2, rel=1e-9)  # symmetric on log scale
+    assert math.log(hi / wide.k) == pytest.approx(1.959963984540054 * 0.8)  # SE = 0.8 k
+    narrow = dataclasses.replace(res, interval_source=None)
+    assert narrow.interval_kinds["k"] == "wald"
