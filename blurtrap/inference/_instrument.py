@@ -38,6 +38,7 @@ from ._drive_fit import (
     drive_check,
     drive_phase_note,
     drive_shape_at,
+    driven_k,
     rd_from_drive,
 )
 from ._models import TrapModel
@@ -176,13 +177,14 @@ def _clean_lines(recs, sts, lines, notes, excluded):
 
             stage = np.asarray(stage, dtype=float)
             resp = drive_response(x, stage, dt, float(r.exposure), frequency=f_d)
-            check_drive_frequency(drive_response(x, stage, dt, float(r.exposure)), f_d, i)
-            check_drive_response(resp, i)
+            check_drive_frequency(stage, dt, f_d, i)
+            check_drive_response(resp, i, str(getattr(r, "position_unit", "m")))
             drive = (abs(resp.ratio), resp.ratio_se, resp.frequency, float(r.exposure), i,
                      resp.ratio)
             notes.append(f"drive: response at {resp.frequency:.6g} Hz to the stage amplitude "
                          f"{resp.stage_amplitude * 1e9:.4g} nm: |x/x_stage| = "
-                         f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} per m (active "
+                         f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} "
+                         f"{getattr(r, 'position_unit', 'm')} per m (active "
                          "calibration; the line is removed before the passive fit)")
         if lines == "keep":
             out.append(r)
@@ -299,12 +301,14 @@ def _power_of(name):
     return _SCALING.get(base, 0)
 
 
-def _outputs(theta, names, plan, n_fit):
-    """The reported vector from the fit vector (volts units) and the inputs after it."""
+def _outputs(theta, names, plan, n_fit, pick=None):
+    """The reported vector from the fit vector (volts units) and the inputs after it;
+    ``pick``: the driven recording's k (:func:`._drive_fit.driven_k`)."""
     values = theta[:n_fit]
     if plan.drive is not None:
         shape = drive_shape_at(plan, values, names)  # the bead's radius from the vector
-        rd = rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape)
+        rd = rd_from_drive(values, names, (theta[n_fit],) + plan.drive[1:], plan.model, shape,
+                           pick)
     else:
         assert plan.gamma_known is not None
         rd = math.sqrt(values[names.index("gamma")] / theta[n_fit])
@@ -330,14 +334,16 @@ def _volts_result(res, plan):
     nan = ~np.isfinite(np.diag(c))
     cov_in[:n_fit, :n_fit] = np.where(np.isfinite(c), c, 0.0)
     cov_in[n_fit, n_fit] = inp_var
-    base = _outputs(theta, names, plan, n_fit)
+    pick = driven_k(res, plan) if plan.drive is not None else None
+    base = _outputs(theta, names, plan, n_fit, pick)
     jac = np.zeros((base.size, theta.size))
     for j in range(theta.size):
         h = 1e-6 * abs(theta[j]) if theta[j] != 0 else 1e-30
         up, dn = theta.copy(), theta.copy()
         up[j] += h
         dn[j] -= h
-        jac[:, j] = (_outputs(up, names, plan, n_fit) - _outputs(dn, names, plan, n_fit)) / (
+        jac[:, j] = (_outputs(up, names, plan, n_fit, pick)
+                     - _outputs(dn, names, plan, n_fit, pick)) / (
             2 * h)
     cov = jac @ cov_in @ jac.T
     if nan.any():
