@@ -224,13 +224,19 @@ COUPLING_Z = 4.5
 def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
     """A note when the traces along the principal axes are correlated at lag +-1: in the
     model the two axes are independent OU sequences (one isotropic friction), so their
-    sample cross-covariance at any lag has mean 0 and variance ``(1/N) sum_n C1(n) C2(n)``
-    (as ``c12`` at lag 0, :func:`_angle_stats`). Unequal detector sensitivities along x and
-    y, cross-talk between the channels or an anisotropic friction couple them."""
+    sample cross-covariances ``c(h)`` have mean 0 and covariances (Bartlett) ``cov(c(h),
+    c(h')) = (1/N) sum_n C1(n) C2(n + h' - h)``: ``S0 = sum C1(n) C2(n)`` (as ``c12`` at lag
+    0, :func:`_angle_stats`) and ``S1 = sum C1(n) C2(n+1) = a0 b1 + a1 b0 + a1 b1 (ra + rb)
+    / (1 - ra rb)`` (``C(n) = c1 r^(|n|-1)`` for ``n != 0``). The principal axes make
+    ``c(0) = 0``, so ``c(+-1)`` is referred to its variance given that, ``(S0 - S1^2/S0)/N``.
+    Unequal detector sensitivities along x and y, cross-talk between the channels or an
+    anisotropic friction couple them."""
     n = xy.n_frames
     a0, a1, ra = _autocov(k1, gamma, eps2, xy)
     b0, b1, rb = _autocov(k2, gamma, eps2, xy)
-    se = math.sqrt((a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb)) / n)
+    s0 = a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb)
+    s1 = a0 * b1 + a1 * b0 + a1 * b1 * (ra + rb) / (1.0 - ra * rb)
+    se = math.sqrt(max(s0 - s1 * s1 / s0, 0.0) / n) if s0 > 0 else 0.0
     x = np.asarray(u.positions, float) - float(np.mean(u.positions))
     y = np.asarray(v.positions, float) - float(np.mean(v.positions))
     z = [float(np.mean(x[1:] * y[:-1])) / se, float(np.mean(y[1:] * x[:-1])) / se]
@@ -239,10 +245,10 @@ def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
     return (f"the motions along the two principal axes are correlated at lag 1 ({z[0]:+.1f} and "
             f"{z[1]:+.1f} standard errors), which a trap with one isotropic friction cannot "
             "produce: unequal x and y detector sensitivities (a per-axis gain; the positions "
-            "must be in one length unit on both axes), cross-talk between the channels, or an "
-            "anisotropic friction (a non-spherical particle, a nearby wall) couple them, and "
-            "k1, k2, gamma and phi are then biased. Calibrate each axis's sensitivity "
-            "separately, or fit x and y alone")
+            "must be in one length unit on both axes), cross-talk between the channels, an "
+            "anisotropic friction (a non-spherical particle) or a drift common to both axes "
+            "couple them, and k1, k2, gamma and phi are then biased. Calibrate each axis's "
+            "sensitivity separately, remove the drift, or fit x and y alone")
 
 
 def _whittle_information(k, gamma, eps2, xy: XYRecording, noise: bool) -> np.ndarray:
