@@ -328,10 +328,12 @@ def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, 
                      "term); consistent with a harmonic trap if |k4| < 2 SE")
     if e2 < 0:
         # unconstrained, as a moment estimate is (clipping it at 0 would bias it up)
-        z = e2 * s**2 / float(err[3]) if err[3] > 0 else -math.inf
+        se = float(err[3])
+        z = e2 * s**2 / se if math.isfinite(se) and se > 0 else math.nan
         notes.append(f"eps^2 < 0 ({z:.2g} SE): the moment estimate is not held at its bound "
                      "(unlike calibrate's likelihood fits); "
-                     + ("consistent with no tracking noise within its error" if z > -2 else
+                     + ("its error is not available" if not math.isfinite(z) else
+                        "consistent with no tracking noise within its error" if z > -2 else
                         "a significantly negative eps^2 means the moments do not follow this "
                         "model (a detector filter, wrong exposure or frame interval)"))
     return AnharmonicResult(

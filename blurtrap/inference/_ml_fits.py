@@ -109,6 +109,8 @@ def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | 
     P0)``, heating), naming the per-power stiffnesses."""
     if not (layout.linear_power and gof_p < _POOL_ALPHA) or (fixed and "c" in fixed):
         return None
+    if any(n.startswith("power_offset") for n in layout.extra_names):
+        return None  # one k per power cannot hold P0 too; the model has the offset already
     alt = make_layout(recs, "per_power", layout.noise, layout.extra_names)
     if alt.n_k < 2:
         return None
@@ -129,8 +131,8 @@ def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | 
             f"likelihood ratio of {lr:.4g} ({dof} dof, p = {p:.2g}; joint goodness of fit p = "
             f"{gof_p:.2g})" + (f", with k [pN/nm] {ks}" if metres else "")
             + ". The stiffness is not proportional to the laser power (an offset, k = c (P - "
-            "P0), or heating), and c, gamma and their errors are biased: fit k='per_power', or "
-            "diagnose the series (power_offset, laser_heating)")
+            "P0)), or gamma changes with it (heating), and c, gamma and their errors are "
+            "biased: fit k='per_power', or diagnose the series (power_offset, laser_heating)")
 
 
 #: robust spectral fit: an ordinate whose Gamma upper tail probability under the fit is below

@@ -124,12 +124,14 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
         tau = g / float(kk)
         if not (tau < dur / 3.0):
             informative, z = temporal_information(r)
-            # a freely diffusing bead has r1 ~ 1; a drift or step is not a lack of temporal
-            # information: named in the message below instead
-            if z < 0.5 * math.sqrt(r.n_frames) and not _shift_hint(recs):
+            shift = _shift_hint(recs)
+            # a freely diffusing bead has r1 ~ 1; frames with some correlation and a drift or
+            # step are the drift's doing (named below), white frames lack information anyway
+            if not informative or (z < 0.5 * math.sqrt(r.n_frames) and not shift):
                 raise FitError(f"{method} fit ran k to {float(kk):.3g} N/m, but the frames are "
                                "far less correlated than a freely diffusing bead's: "
-                               + _no_temporal_information_message([r], [(informative, z)]))
+                               + _no_temporal_information_message([r], [(informative, z)])
+                               + shift)
             what = "record" if block_frames is None else f"block ({n} frames)"
             d = BOLTZMANN * float(r.temperature) / g
             raise FitError(
@@ -139,7 +141,7 @@ def _check_relaxation_resolved(res, recs, method, block_frames=None):
                 f"= {g:.4g} +- {ge:.2g} N s/m (D = {d * 1e12:.4g} um^2/s) is still determined. "
                 "Record longer than ~10 tau, use a stiffer trap"
                 + (", or fewer, longer blocks (n_blocks)" if block_frames else "") + "."
-                + _shift_hint(recs)
+                + shift
             )
     return res
 
@@ -247,10 +249,10 @@ def _effect_parameters_hint(out, names, fixed) -> str:
     if not extra:
         return ""
     shown = ", ".join(f"{n} = {v:.4g}" for n, v in extra)
-    return (f"The model's effect parameters ended at {shown}: an effect the data do not show "
-            "(e.g. a detector filter on a trace without one, diode_filter='fit') leaves its "
-            "parameters undetermined and the fit wanders along them; fit without that effect "
-            "(diagnose says which the data need) or hold its parameters (fixed=...).")
+    return (f" The model's effect parameters ended at {shown}: if the data do not show one of "
+            "these effects (e.g. a detector filter on a trace without one, diode_filter='fit'), "
+            "its parameters are undetermined and the fit wanders along them; fit without it "
+            "(diagnose says which effects the data need) or hold its parameters (fixed=...).")
 
 
 def _held_sentence(fixed) -> str:
@@ -284,10 +286,9 @@ def _check_fit(out, names, method, strict=True, notes=None, recs=None, fixed=Non
         raise FitError(
             f"{method} fit did not converge after {int(out.n_steps)} steps "
             f"(max |grad| = {float(out.grad_norm):.3g}); parameters {names}. "
-            + " ".join(t for t in (f"The frames show {seen}." if seen else "", effects) if t)
-            + ("" if seen or effects else "Try another method or check the data (outliers, "
-               "drift, wrong exposure/frame interval).")
-            + hint
+            + (f"The frames show {seen}." if seen else "Try another method or check the data "
+               "(outliers, drift, wrong exposure/frame interval).")
+            + effects + hint
         )
     if not bool(out.hessian_pd):
         if not strict:

@@ -64,9 +64,10 @@ def _fit_variance(recs, layout, model, method_name, notes):
     if not bool(ok):
         raise FitError(
             f"{method_name}: least squares did not converge; parameters {layout.names}"
-            + (". With k = c P, a stiffness not proportional to the power (an offset, k = c (P - "
-               "P0), or heating) has no good fit: fit k='per_power' with "
-               "method='likelihood', or diagnose the series" if layout.linear_power else
+            + (". With k = c P, a stiffness not proportional to the power (an offset, k = c "
+               "(P - P0)) or a gamma that changes with it (heating) has no good fit: fit "
+               "k='per_power' with method='likelihood', or diagnose the series"
+               if layout.linear_power else
                ". The variances may not follow the model (check each recording's own fit), "
                "or the data do not determine these parameters: method='likelihood' uses "
                "all the frames"))
