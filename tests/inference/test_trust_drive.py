@@ -181,3 +181,21 @@ def test_the_driven_recordings_own_stiffness_gives_rd():
     assert abs(rd.value - RD) < 3 * rd.error, (rd.value, rd.error)
     assert abs(res.k_per_recording[1] - K) < 3 * res.k_per_recording_err[1]
     assert not phase_notes(res)
+
+
+def test_a_trace_in_metres_gets_the_same_phase_check():
+    # positions in metres: the drive checks the position calibration (drive_check) and the
+    # phase is checked as in volts (the fit's friction in metres for the bead's H)
+    stage, s = drive(150e-9)
+
+    def fit(sign):
+        rec = bt.Recording(sign * (thermal(50) + np.real(H * s)), frame_interval=DT,
+                           exposure=1e-9 * DT, temperature=295.0, stage=stage,
+                           metadata={"detector": "photodiode", "drive": {"frequency_Hz": FD}})
+        return bt.calibrate(rec)
+
+    right = fit(1.0)
+    assert not phase_notes(right)
+    assert any("position scale" in n and "SE from 1)" in n for n in right.notes)
+    (note,) = phase_notes(fit(-1.0))
+    assert "inverted" in note
