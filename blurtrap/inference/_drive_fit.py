@@ -191,7 +191,7 @@ def drive_phase_note(res, plan) -> str | None:
     fit's units (volts or metres: Rd > 0 does not change the phase); None when it agrees."""
     from ._active import fluid_response
 
-    if plan.drive is None or len(plan.drive) < 6:
+    if plan.drive is None:
         return None
     names = list(res.param_names)
     values = np.asarray(res.values, float)

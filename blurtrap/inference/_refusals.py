@@ -76,17 +76,15 @@ def _no_temporal_information_message(recs, info):
     )
 
 
-def _slow_relaxation_hint(recs, values, names, shift=None):
+def _slow_relaxation_hint(recs, values, names, shift):
     """A sentence when the fitted tau is not short compared with the record (else '');
-    ``shift``: a callable giving :func:`mean_shift_sentence` of ``recs`` (computed here
-    without it)."""
+    ``shift``: a callable giving :func:`mean_shift_sentence` of ``recs``."""
     if "gamma" not in names or "k" not in names:
         return ""
     tau = float(values[names.index("gamma")]) / float(values[names.index("k")])
     dur = min(r.n_frames * float(r.frame_interval) for r in recs)
     if math.isfinite(tau) and tau > dur / 30.0:
-        shifted = shift() if shift is not None else mean_shift_sentence(recs, _unit(recs))
-        if shifted:  # named among the causes: the step/drift's doing
+        if shift():  # named among the causes: the step/drift's doing
             return (f" The fitted relaxation time tau = gamma/k = {tau:.3g} s is the step or "
                     "drift read as a slow relaxation.")
         info = [temporal_information(r) for r in recs]
@@ -214,6 +212,7 @@ def _singular_fisher_causes(recs, values, names, shift=None) -> str:
                       "record at several exposures")
     if out:
         causes.append(out)
+    # the caller's once-computed mean_shift_sentence of recs (``shift``), else computed here
     shift = shift() if shift is not None else mean_shift_sentence(recs, _unit(recs))
     if shift:
         causes.append(shift)

@@ -203,12 +203,22 @@ def _autocov(k, gamma, eps2, xy: XYRecording):
     return c0, c1, math.exp(-xy.frame_interval * k / gamma)
 
 
+def _cross_sums(k1, k2, gamma, eps2, xy: XYRecording) -> tuple[float, float]:
+    """``(S0, S1) = (sum_n C1(n) C2(n), sum_n C1(n) C2(n+1))`` of the two axes' frame
+    autocovariances (``C(n) = c1 r^(|n|-1)`` for ``n != 0``): N times the variance of a
+    sample cross-covariance and the covariance of neighbouring lags' (Bartlett)."""
+    a0, a1, ra = _autocov(k1, gamma, eps2, xy)
+    b0, b1, rb = _autocov(k2, gamma, eps2, xy)
+    return (a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb),
+            a0 * b1 + a1 * b0 + a1 * b1 * (ra + rb) / (1.0 - ra * rb))
+
+
 def _angle_stats(k1, k2, gamma, eps2, xy: XYRecording, l1, l2):
     """``(phi_err, anisotropy_z)`` from the exact frame autocovariances (module docstring)."""
     n = xy.n_frames
     a0, a1, ra = _autocov(k1, gamma, eps2, xy)
     b0, b1, rb = _autocov(k2, gamma, eps2, xy)
-    cross = a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb)
+    cross = _cross_sums(k1, k2, gamma, eps2, xy)[0]
     sq = a0**2 + 2.0 * a1**2 / (1.0 - ra**2) + b0**2 + 2.0 * b1**2 / (1.0 - rb**2)
     gap_model = abs(a0 - b0)
     phi_err = math.sqrt(cross / n) / gap_model if gap_model > 0 else math.inf
@@ -231,16 +241,14 @@ def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
     ``c(0) = 0``, so ``c(+-1)`` is referred to its variance given that, ``(S0 - S1^2/S0)/N``.
     Unequal detector sensitivities along x and y, cross-talk between the channels or an
     anisotropic friction couple them."""
-    n = xy.n_frames
-    a0, a1, ra = _autocov(k1, gamma, eps2, xy)
-    b0, b1, rb = _autocov(k2, gamma, eps2, xy)
-    s0 = a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb)
-    s1 = a0 * b1 + a1 * b0 + a1 * b1 * (ra + rb) / (1.0 - ra * rb)
-    se = math.sqrt(max(s0 - s1 * s1 / s0, 0.0) / n) if s0 > 0 else 0.0
+    s0, s1 = _cross_sums(k1, k2, gamma, eps2, xy)
+    se = math.sqrt(max(s0 - s1 * s1 / s0, 0.0) / xy.n_frames) if s0 > 0 else 0.0
+    if not se > 0:
+        return None
     x = np.asarray(u.positions, float) - float(np.mean(u.positions))
     y = np.asarray(v.positions, float) - float(np.mean(v.positions))
     z = [float(np.mean(x[1:] * y[:-1])) / se, float(np.mean(y[1:] * x[:-1])) / se]
-    if not (se > 0 and max(abs(t) for t in z) > COUPLING_Z):
+    if not max(abs(t) for t in z) > COUPLING_Z:
         return None
     return (f"the motions along the two principal axes are correlated at lag 1 ({z[0]:+.1f} and "
             f"{z[1]:+.1f} standard errors), which a trap with one isotropic friction cannot "
