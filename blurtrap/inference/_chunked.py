@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._newton import SafeguardedNewton
+from ._newton import FixedArgs, ReducedObjective, SafeguardedNewton
 from ._nodes import frequency_span, use_nodes
 from ._problems import SpectralArgs, SpectralObjective
 from ._whittle_pass import (
@@ -55,14 +55,29 @@ def chunked_applies(nll, args) -> bool:
     """The chunked Newton fit applies: the Whittle objective
     (:class:`._problems.SpectralObjective`) of the closed-form core model (fused pass), or,
     with :data:`EFFECTS`, of a model whose spectrum can be evaluated chunk by chunk
-    (:func:`args_chunkable`); chunking on."""
-    return objective_chunkable(nll, args) and (EFFECTS or _fused_pass_applies(args))
+    (:func:`args_chunkable`), or either with parameters held; chunking on."""
+    return objective_chunkable(nll, args) and (EFFECTS or _fused_pass_applies(_inner(args)))
 
 
 def objective_chunkable(nll, args) -> bool:
-    """``nll`` is the Whittle objective and ``args`` can be evaluated in ordinate chunks
-    (:func:`args_chunkable`): its sums (value, gradient, Hessian) are sums over chunks."""
+    """``nll`` is the Whittle objective (or its :class:`._newton.ReducedObjective` with held
+    parameters) and ``args`` can be evaluated in ordinate chunks (:func:`args_chunkable`):
+    its sums (value, gradient, Hessian) are sums over chunks."""
+    if isinstance(nll, ReducedObjective) and isinstance(args, FixedArgs):
+        nll, args = nll.inner, args.inner
     return isinstance(nll, SpectralObjective) and args_chunkable(args)
+
+
+def _inner(args):
+    """The full objective's args of ``args`` (:class:`._newton.FixedArgs` unwrapped)."""
+    return args.inner if isinstance(args, FixedArgs) else args
+
+
+def _rewrap(args, parts):
+    """``parts`` (chunks of ``_inner(args)``, or None) in ``args``' held-parameter wrapper."""
+    if parts is None or not isinstance(args, FixedArgs):
+        return parts
+    return [eqx.tree_at(lambda z: z.inner, args, c) for c in parts]
 
 
 def args_chunkable(args) -> bool:
@@ -111,13 +126,16 @@ def ordinate_step(args: SpectralArgs) -> int:
     return CHUNK - 2 if _spans_nodes(args) else CHUNK
 
 
-def ordinate_chunks(args: SpectralArgs, skip_empty=True) -> list[SpectralArgs]:
+def ordinate_chunks(args, skip_empty=True) -> list:
     """``args`` cut along the ordinates into consecutive pieces of :func:`ordinate_step`
     ordinates, the last one (or the only one) padded with copies of the last ordinate at
     weight 0 (and, for a spectrum folded on nodes, two span ordinates at weight 0 appended),
     so that every piece has the same shape, :data:`CHUNK` wide, whatever the record length;
     with ``skip_empty`` the pieces whose weight is all 0 are left out (they add exactly 0 to
-    every sum), keeping at least one."""
+    every sum), keeping at least one. Held-parameter args (:class:`._newton.FixedArgs`) are
+    cut inside their wrapper."""
+    if isinstance(args, FixedArgs):
+        return _rewrap(args, ordinate_chunks(args.inner, skip_empty))
     f, s2, pw, wt = (np.asarray(z) for z in (args.f, args.s2, args.power, args.weight))
     m = f.shape[-1]
     size = ordinate_step(args)
@@ -169,9 +187,11 @@ def binned_ordinates(args: SpectralArgs, width: int) -> SpectralArgs:
     return _with_ordinates(args, mean(f), mean(s2), mean(pw), wsum)
 
 
-def coarse_chunks(args: SpectralArgs) -> list[SpectralArgs] | None:
+def coarse_chunks(args) -> list | None:
     """The chunks of the coarse start-value objective (the grouping of
     :func:`._whittle_pass.spectral_newton_plan`), or None where it has none."""
+    if isinstance(args, FixedArgs):
+        return _rewrap(args, coarse_chunks(args.inner))
     width = min(_COARSE_MAX_WIDTH, args.power.shape[-1] // _COARSE_GROUPS)
     if width < 2 or not coarse_start_applies(args):
         return None

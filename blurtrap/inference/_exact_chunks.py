@@ -41,6 +41,7 @@ import numpy as np
 from . import _irregular
 from ._irregular import IrregularArgs, frame_params, irregular_nll
 from ._likelihood import _affine_scan, gls_loglik, innovation_variances_at
+from ._newton import FixedArgs, ReducedObjective
 from ._problems import ExactArgs, exact_nll
 
 #: frames per chunk (a power of two); ``None`` turns the chunked pass off (one compiled pass
@@ -281,11 +282,9 @@ def _split(nll, args):
     for base, kind in _LIKELIHOODS:
         if nll is base and isinstance(args, kind):
             return args, None
-    from ._fixed import _REDUCED, FixedArgs  # imports this package's _fit: not at the top
-
-    if isinstance(args, FixedArgs):
+    if isinstance(nll, ReducedObjective) and isinstance(args, FixedArgs):
         for base, kind in _LIKELIHOODS:
-            if isinstance(args.inner, kind) and _REDUCED.get(base) is nll:
+            if isinstance(args.inner, kind) and nll.inner is base:
                 return args.inner, (args.full, args.free)
     return None
 

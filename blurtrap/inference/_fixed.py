@@ -27,30 +27,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import FitOutput
+from ._newton import FixedArgs, ReducedObjective
 
 
-class FixedArgs(eqx.Module):
-    """The arguments of a reduced objective: the original ``inner`` args, the full natural
-    parameter vector ``full`` (the held values in place) and the free indices (static)."""
-
-    inner: Any
-    full: jax.Array
-    free: tuple = eqx.field(static=True)
-
-
-_REDUCED: dict = {}
-
-
-def reduced_objective(nll):
-    """``nll`` with the held parameters of :class:`FixedArgs` inserted (cached per ``nll``)."""
-    if nll not in _REDUCED:
-        def f(q, a: FixedArgs):
-            p = a.full.at[jnp.asarray(a.free)].set(q)
-            return nll(p, a.inner)
-
-        f.__name__ = f"{getattr(nll, '__name__', 'nll')}_fixed"
-        _REDUCED[nll] = f
-    return _REDUCED[nll]
+def reduced_objective(nll) -> ReducedObjective:
+    """``nll`` with the held parameters of :class:`._newton.FixedArgs` inserted
+    (:class:`._newton.ReducedObjective`: the full objective's own pass on the free
+    parameters)."""
+    return ReducedObjective(nll)
 
 
 def parse_fixed(fixed, names) -> dict[str, tuple[float, float]]:
@@ -90,22 +74,30 @@ def reduce(names, scale, args, fixed: dict):
     for i, n in enumerate(names):
         if n in fixed:
             full[i] = fixed[n][0]
+    positive = all(fixed[n][0] > 0 for n in names if n in fixed)
     return free, jnp.asarray(np.asarray(scale)[list(free)]), FixedArgs(args, jnp.asarray(full),
-                                                                        free)
+                                                                        free, positive)
 
 
 def expand(out: FitOutput, free, n: int, full) -> FitOutput:
     """The reduced fit's output on the full parameter vector (held entries: their value,
-    zero covariance, not at a bound)."""
-    idx = jnp.asarray(free)
-    value = jnp.asarray(full).at[idx].set(out.value)
+    zero covariance, not at a bound). On the host (numpy): eager scatters compiled a small
+    program each on a process's first held fit."""
+    idx = np.asarray(free)
+    value = np.array(full, dtype=float)
+    value[idx] = np.asarray(out.value)
 
     def embed(c):
-        return jnp.zeros((n, n), dtype=c.dtype).at[idx[:, None], idx[None, :]].set(c)
+        e = np.zeros((n, n), dtype=float)
+        e[np.ix_(idx, idx)] = np.asarray(c)
+        return jnp.asarray(e)
 
-    at_bound = out.at_bound if out.at_bound is None else \
-        jnp.zeros(n, dtype=bool).at[idx].set(out.at_bound)
-    return FitOutput(value=value, cov=embed(out.cov), nll=out.nll, grad_norm=out.grad_norm,
+    at_bound = None
+    if out.at_bound is not None:
+        at_bound = np.zeros(n, dtype=bool)
+        at_bound[idx] = np.asarray(out.at_bound)
+        at_bound = jnp.asarray(at_bound)
+    return FitOutput(value=jnp.asarray(value), cov=embed(out.cov), nll=out.nll, grad_norm=out.grad_norm,
                      n_steps=out.n_steps, success=out.success, converged=out.converged,
                      hessian_pd=out.hessian_pd, at_bound=at_bound, result=out.result,
                      cov_given_bound=(None if out.cov_given_bound is None
@@ -119,6 +111,16 @@ def _grad_fn(nll):
     if nll not in _GRADS:
         _GRADS[nll] = eqx.filter_jit(jax.vmap(jax.grad(nll), in_axes=(0, None)))
     return _GRADS[nll]
+
+
+def _grads(nll, pts, args) -> np.ndarray:
+    """The gradients of ``nll`` at the rows of ``pts`` (P, n), numpy. The batch is padded to a
+    power of two (at least 2) with copies of the first row, so the propagation of held
+    errors and the held-value test share one compiled gradient per objective and shape."""
+    pts = np.asarray(pts, dtype=float)
+    size = max(2, 1 << (len(pts) - 1).bit_length())
+    padded = np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)])
+    return np.asarray(_grad_fn(nll)(jnp.asarray(padded), args), dtype=float)[:len(pts)]
 
 
 def propagate(nll, args, value, cov, names, fixed: dict, rel_step=1e-4):
@@ -141,7 +143,7 @@ def propagate(nll, args, value, cov, names, fixed: dict, rel_step=1e-4):
             p = value.copy()
             p[i] += s
             pts.append(p)
-    grads = np.asarray(_grad_fn(nll)(jnp.asarray(np.stack(pts)), args))
+    grads = _grads(nll, np.stack(pts), args)
     # H[free, x]: d/dx of the free gradient, by central differences of the exact gradient
     h_fx = np.stack([(grads[2 * j][free] - grads[2 * j + 1][free]) / (2 * steps[j])
                      for j in range(len(held))], axis=-1)
@@ -218,16 +220,16 @@ def _score_and_information(nll, args, value, scale, fisher_args):
             p = value.copy()
             p[i] += s
             pts.append(p)
-    pts = jnp.asarray(np.stack(pts))
+    pts = np.stack(pts)
     # the exact gradient at ``value`` only (a batch of one: the points above are for the
     # Whittle information, which is cheap; the exact likelihood's gradient may not be)
-    g = np.asarray(_grad_fn(nll)(pts[:1], args), dtype=float)[0]
+    g = _grads(nll, pts[:1], args)[0]
     # the expected information: the Whittle Hessian with the periodogram replaced by the
     # model spectrum at ``value``, sum_f w_f grad log S_f grad log S_f^T (positive
     # semi-definite however far the held value is from the data's optimum)
     from ._problems import spectral_nll
 
-    grads = np.asarray(_grad_fn(spectral_nll)(pts, fisher_args), dtype=float)
+    grads = _grads(spectral_nll, pts, fisher_args)
     hess = np.stack([(grads[1 + 2 * i] - grads[2 + 2 * i]) / (steps[i] - low[i])
                      for i in range(n)])
     hess = 0.5 * (hess + hess.T)

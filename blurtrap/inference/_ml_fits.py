@@ -183,17 +183,20 @@ def screen_model(recs, model, k, start=None):
     return dict(zip(layout.names, map(float, p))), nll, gof, ok
 
 
-def _fit_held(fit, nll, scale, args, names, fixed):
+def _fit_held(fit, nll, scale, args, names, fixed, propagate=True):
     """``fit(nll, scale, args)`` with the parameters in ``fixed`` ({name: (value, se)}) held:
     ``(FitOutput on all parameters, held)``, the input errors propagated into the covariance
-    (:mod:`._fixed`); ``held`` is None without fixed parameters, else what the intervals need
-    (reduced objective, its start scale, args and output)."""
+    (:mod:`._fixed`) unless ``propagate`` is False (a start value, whose errors are not
+    used); ``held`` is None without fixed parameters, else what the intervals need (reduced
+    objective, its start scale, args and output)."""
     if not fixed:
         return fit(nll, scale, args), None
     free, fscale, fargs = reduce_fixed(names, scale, args, fixed)
     red = reduced_objective(nll)
     out = fit(red, fscale, fargs)
     full = expand_fixed(out, free, len(names), fargs.full)
+    if not propagate:
+        return full, None
     cov = propagate_fixed(nll, args, full.value, full.cov, names, fixed)
     full = eqx.tree_at(lambda o: o.cov, full, jnp.asarray(cov))
     return full, (red, fscale, fargs, out, free, any(se > 0 for _, se in fixed.values()))
@@ -211,7 +214,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # start from the (cheap, asymptotically equivalent) Whittle estimate
     sargs = _spectral_args(recs, layout, model, 1, None)
     moment = _start_vector(recs, layout, model.noise)
-    wout, _ = _fit_held(_fit_start, spectral_nll, moment, sargs, layout.names, fixed)
+    wout, _ = _fit_held(_fit_start, spectral_nll, moment, sargs, layout.names, fixed, False)
     starts = [wout.value] if bool(wout.success) else []
     names = layout.names
     if not starts or ("k" in names and _leakage_index(

@@ -96,6 +96,47 @@ class FdObjective(AbstractObjective):
         return fd_hessian_pass(self.fn, self.h)(x, scale, args)
 
 
+class FixedArgs(eqx.Module):
+    """The arguments of a :class:`ReducedObjective`: the full objective's ``inner`` args, the
+    full natural parameter vector ``full`` (the held values in place), the free indices, and
+    whether every held value is positive (``positive``: the full objective's own pass, in log
+    parameters, may run with the held ones at log-offset 0; all static)."""
+
+    inner: Any
+    full: jax.Array
+    free: tuple = eqx.field(static=True)
+    positive: bool = eqx.field(static=True, default=True)
+
+
+class ReducedObjective(AbstractObjective):
+    """The objective ``inner`` with some parameters held (``calibrate(..., fixed=...)``):
+    ``nll(q, a) = inner(p, a.inner)``, ``p`` the full vector with the free entries ``q``.
+
+    Its pass is the full objective's own pass (the fused Whittle pass, or the exact
+    likelihood's) restricted to the free rows and columns: in log parameters the held entries
+    sit at ``x = 0`` with scale their value, so the derivatives in the free ones are exactly
+    the full pass's. A held value of 0 (``tracking_var``) has no log parameter: there the pass
+    is autodiff of the reduced function. Its coarse start-value data are the full one's."""
+
+    inner: Callable
+
+    def __call__(self, q, a: FixedArgs):
+        return self.inner(a.full.at[jnp.asarray(a.free)].set(q), a.inner)
+
+    def value_grad_hess(self, x, scale, a: FixedArgs):
+        if not a.positive:
+            return super().value_grad_hess(x, scale, a)
+        idx = jnp.asarray(a.free)
+        xf = jnp.zeros_like(a.full).at[idx].set(x)
+        v, g, h = as_objective(self.inner).value_grad_hess(xf, a.full.at[idx].set(scale),
+                                                           a.inner)
+        return v, g[idx], h[idx[:, None], idx[None, :]]
+
+    def coarse_args(self, a: FixedArgs):
+        c = as_objective(self.inner).coarse_args(a.inner)
+        return None if c is None else eqx.tree_at(lambda z: z.inner, a, c)
+
+
 def as_objective(nll) -> AbstractObjective:
     """``nll`` itself if it is an :class:`AbstractObjective`, else wrapped in
     :class:`FunctionObjective`."""

@@ -1,0 +1,82 @@
+"""Fits with held parameters (``calibrate(..., fixed=...)``) run the full objective's own pass
+restricted to the free parameters (``_newton.ReducedObjective``), in the Whittle fit's
+ordinate chunks: checked against JAX autodiff of the plain reduced function (written here,
+not the package's), and by counting compilations at a new record length.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _simconfig import DT, GAMMA
+
+import blurtrap as bt
+from blurtrap.inference import _chunked
+from blurtrap.inference._fixed import reduce as reduce_fixed
+from blurtrap.inference._fixed import reduced_objective
+from blurtrap.inference._models import get_model
+from blurtrap.inference._newton import SafeguardedNewton, autodiff_pass
+from blurtrap.inference._problems import make_layout, spectral_nll
+from blurtrap.inference._spectral import _spectral_args
+
+
+def frames(n, seed, k=2e-5):
+    x = bt.simulate(k, GAMMA, DT, DT, n, key=jax.random.key(seed), method="exact_frames",
+                    tracking_std=2e-9)
+    return np.asarray(x, dtype=np.float64).ravel()
+
+
+def rec(y):
+    return bt.Recording(y, frame_interval=DT, exposure=DT)
+
+
+def _plain_reduced(q, a):
+    """The reduced objective as a plain function (the reference: autodiff of this)."""
+    return spectral_nll(a.full.at[jnp.asarray(a.free)].set(q), a.inner)
+
+
+@pytest.mark.parametrize("model", ["standard", "standard+drift"])
+@pytest.mark.parametrize("fixed", [{"gamma": (GAMMA, 0.0)}, {"tracking_var": (0.0, 0.0)}],
+                         ids=["gamma", "tracking_var at 0"])
+def test_reduced_pass_equals_autodiff_of_the_reduced_function(model, fixed):
+    """Value, gradient and Hessian of the held-parameter objective, summed over its ordinate
+    chunks, equal JAX autodiff of the plain reduced function on all ordinates, to 1e-11 of
+    the largest entry: the fused Whittle pass (``standard``) and a model with an effect; a
+    held value above 0 (the full pass sliced) and tracking_var held at 0 (autodiff)."""
+    m = get_model(model)
+    recs = [rec(frames(40_000, 3))]  # 20 000 ordinates: two chunks
+    layout = make_layout(recs, "shared", True, tuple(p.name for p in m.extra_params))
+    a = _spectral_args(recs, layout, m, 1, None)
+    scale = np.array([2.1e-5, 1.05 * GAMMA, 5e-18, 1e-20][:len(layout.names)])
+    _, fscale, fargs = reduce_fixed(layout.names, scale, a, fixed)
+    assert fargs.positive == ("gamma" in fixed)
+    red = reduced_objective(spectral_nll)
+    assert _chunked.chunked_applies(red, fargs)
+    chunks = _chunked.ordinate_chunks(fargs)
+    assert len(chunks) == 2
+    x = jnp.asarray([0.03, -0.02, 0.2][:fscale.shape[0]])
+    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
+    for c in chunks:
+        acc = _chunked._chunk_pass(red, x, fscale, c, acc)
+    ref = eqx.filter_jit(autodiff_pass(_plain_reduced))(x, fscale, fargs)
+    for got, want in zip(acc, ref):
+        got, want = np.asarray(got), np.asarray(want)
+        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+
+
+def test_held_fit_at_a_new_length_compiles_no_fit_program(compiles):
+    """After one held-gamma Whittle calibration of two chunks, one of a new length in a new
+    bucket compiles none of the fit's programs (before: one compiled Newton loop of the
+    reduced objective per padded length); k agrees with the truth."""
+    y = frames(150_000, 51)
+    fixed = {"gamma": GAMMA}
+    fit_programs = ("_chunk_pass", "_update", "_start", "_finish", "_coarse", "_newton",
+                    "_bfgs")
+    jax.clear_caches()
+    bt.calibrate(rec(y[:40_000]), likelihood="whittle", fixed=fixed)
+    compiles.reset()
+    res = bt.calibrate(rec(y), likelihood="whittle", fixed=fixed)
+    assert res.converged and abs(res.k / 2e-5 - 1) < 5 * res.k_err / 2e-5
+    assert [n for n in compiles.names if any(p in n for p in fit_programs)] == [], \
+        compiles.names
