@@ -114,11 +114,14 @@ def _grad_fn(nll):
 
 
 def _grads(nll, pts, args) -> np.ndarray:
-    """The gradients of ``nll`` at the rows of ``pts`` (P, n), numpy. The batch is padded to a
-    power of two (at least 2) with copies of the first row, so the propagation of held
-    errors and the held-value test share one compiled gradient per objective and shape."""
+    """The gradients of ``nll`` at the rows of ``pts`` (P, n), numpy. The batch is padded
+    with copies of the first row to the power of two at or above ``max(P, 2 n + 1)``, so the
+    propagation of held errors (2 points per held input) and the held-value test's exact
+    gradient (1) and Whittle information (2 n + 1) share one compiled gradient per objective
+    and shape (a hydrodynamic model's took ~4 s to compile; a few more evaluations cost
+    milliseconds)."""
     pts = np.asarray(pts, dtype=float)
-    size = max(2, 1 << (len(pts) - 1).bit_length())
+    size = 1 << (max(len(pts), 2 * pts.shape[1] + 1) - 1).bit_length()
     padded = np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)])
     return np.asarray(_grad_fn(nll)(jnp.asarray(padded), args), dtype=float)[:len(pts)]
 

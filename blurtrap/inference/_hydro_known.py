@@ -68,6 +68,9 @@ from __future__ import annotations
 import math
 from typing import cast
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .._constants import BOLTZMANN
@@ -162,9 +165,6 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
     inside the fitted band (dt >~ tau: the spectrum's shape is not fitted). ``with_cov``:
     also the point ``(k0, gamma0)`` and the Whittle covariance of (log k, log gamma) (NaN rows
     for a held gamma), ``(bias, se, point, cov)``."""
-    import jax
-    import jax.numpy as jnp
-
     from ._models import TrapModel
     from ._starts import moment_start
 
@@ -189,20 +189,16 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
         # predicted +2 %, a fit with the correction moved k by -4 %)
         return _untrusted(with_cov, k0, g0)
     core = TrapModel(blur=model.blur, alias=model.alias, noise=model.noise, name="rule")
-    args = (jnp.asarray([float(rec.frame_interval)]), jnp.asarray([float(rec.exposure)]),
-            jnp.asarray([float(rec.temperature)]))
-    fj = jnp.asarray(f)[None, :]
-
-    def log_p0(theta):
-        return jnp.log(core.psd(fj, jnp.exp(theta[:1]), jnp.exp(theta[1]), theta[2] * e0,
-                                *args)[0])
-
-    theta = jnp.asarray([math.log(k0), math.log(g0), 1.0])
-    p0 = np.exp(np.asarray(log_p0(theta)))
-    p1 = np.asarray(core.add(effect).psd(fj, jnp.asarray([k0]), g0, e0, *args,
-                                         extras={"hydro_radius": jnp.asarray(radius)})[0])
+    # padded to _N_BINS ordinates (at weight 0): one compiled program per model
+    fj = np.concatenate([f, np.full(_N_BINS - f.size, f[-1])])[None, :]
+    w = np.concatenate([w, np.zeros(_N_BINS - w.size)])
+    theta = np.array([math.log(k0), math.log(g0), 1.0])
+    meta = np.array([float(rec.frame_interval), float(rec.exposure), float(rec.temperature),
+                     e0, float(radius)])
+    p0, p1, jac = (np.asarray(z) for z in _rule_spectra(core, core.add(effect), fj, theta,
+                                                         meta))
     free = [0] + ([] if gamma_fixed is not None else [1]) + ([2] if model.noise else [])
-    jac = np.asarray(jax.jacfwd(log_p0)(theta))[:, free]
+    jac = jac[:, free]
     fisher = (jac * w[:, None]).T @ jac
     cov = np.linalg.pinv(fisher)
     step = -cov @ (jac.T @ (w * (1.0 - p1 / p0)))
@@ -215,6 +211,22 @@ def predicted_bias(rec, model, effect, radius, band, excluded, gamma_fixed=None,
                 if jdx < 2:
                     cov2[idx, jdx] = cov[j, i]
     return (bias, se, (k0, g0), cov2) if with_cov else (bias, se)
+
+
+@eqx.filter_jit
+def _rule_spectra(core, full, fj, theta, meta):
+    """The spectrum without the effect ``p0`` at ``theta`` = (log k, log gamma, eps^2 / e0),
+    with it ``p1`` (``full``: the core model with the effect, hydrodynamic radius
+    ``meta[4]``) and the Jacobian of log ``p0`` in ``theta``; ``meta`` = (dt, W, T, e0,
+    radius). Compiled once per model and padded frequency count."""
+    args = tuple(jnp.reshape(meta[i], (1,)) for i in range(3))
+
+    def log_p0(t):
+        return jnp.log(core.psd(fj, jnp.exp(t[:1]), jnp.exp(t[1]), t[2] * meta[3], *args)[0])
+
+    p1 = full.psd(fj, jnp.exp(theta[:1]), jnp.exp(theta[1]), meta[3], *args,
+                  extras={"hydro_radius": meta[4]})[0]
+    return jnp.exp(log_p0(theta)), p1, jax.jacfwd(log_p0)(theta)
 
 
 def _untrusted(with_cov, k0, g0):
