@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _chunked
 from ._fit import FitOutput
 from ._newton import FixedArgs, ReducedObjective
 
@@ -119,11 +120,18 @@ def _grads(nll, pts, args) -> np.ndarray:
     propagation of held errors (2 points per held input) and the held-value test's exact
     gradient (1) and Whittle information (2 n + 1) share one compiled gradient per objective
     and shape (a hydrodynamic model's took ~4 s to compile; a few more evaluations cost
-    milliseconds)."""
+    milliseconds). The Whittle objective's gradient is summed over its ordinate chunks
+    (:mod:`._chunked`), so a record of a new length compiles nothing here."""
     pts = np.asarray(pts, dtype=float)
     size = 1 << (max(len(pts), 2 * pts.shape[1] + 1) - 1).bit_length()
-    padded = np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)])
-    return np.asarray(_grad_fn(nll)(jnp.asarray(padded), args), dtype=float)[:len(pts)]
+    padded = jnp.asarray(np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)]))
+    fn = _grad_fn(nll)
+    if _chunked.objective_chunkable(nll, args):  # a sum over ordinates: a new length
+        out = sum(np.asarray(fn(padded, c), dtype=float)  # compiles nothing
+                  for c in _chunked.ordinate_chunks(args))
+    else:
+        out = np.asarray(fn(padded, args), dtype=float)
+    return np.asarray(out)[:len(pts)]
 
 
 def propagate(nll, args, value, cov, names, fixed: dict, rel_step=1e-4):

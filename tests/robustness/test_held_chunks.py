@@ -68,11 +68,12 @@ def test_reduced_pass_equals_autodiff_of_the_reduced_function(model, fixed):
 def test_held_fit_at_a_new_length_compiles_no_fit_program(compiles):
     """After one held-gamma Whittle calibration of two chunks, one of a new length in a new
     bucket compiles none of the fit's programs (before: one compiled Newton loop of the
-    reduced objective per padded length); k agrees with the truth."""
+    reduced objective per padded length) nor the held-value test's gradients (before: one
+    per padded length); k agrees with the truth."""
     y = frames(150_000, 51)
     fixed = {"gamma": GAMMA}
     fit_programs = ("_chunk_pass", "_update", "_start", "_finish", "_coarse", "_newton",
-                    "_bfgs")
+                    "_bfgs", "SpectralObjective")
     jax.clear_caches()
     bt.calibrate(rec(y[:40_000]), likelihood="whittle", fixed=fixed)
     compiles.reset()
@@ -80,3 +81,23 @@ def test_held_fit_at_a_new_length_compiles_no_fit_program(compiles):
     assert res.converged and abs(res.k / 2e-5 - 1) < 5 * res.k_err / 2e-5
     assert [n for n in compiles.names if any(p in n for p in fit_programs)] == [], \
         compiles.names
+
+
+def test_held_error_gradients_summed_over_chunks_equal_the_whole():
+    """The gradients behind the propagation of held errors and the held-value test, summed
+    over ordinate chunks (a model folded on nodes: each chunk carries the
+    record's span), equal JAX's gradient of the Whittle objective on all ordinates (1e-10)."""
+    from blurtrap.inference._fixed import _grads
+    from blurtrap.inference._problems import _spectral_nll
+
+    m = get_model("standard+exposure_kernel")
+    recs = [rec(frames(40_000, 4))]
+    layout = make_layout(recs, "shared", True, tuple(p.name for p in m.extra_params))
+    a = _spectral_args(recs, layout, m, 1, None)
+    assert _chunked.objective_chunkable(spectral_nll, a) and _chunked._spans_nodes(a)
+    p0 = np.array([2.1e-5, 1.05 * GAMMA, 5e-18, 1.4e-6])
+    pts = np.stack([p0, p0 * 1.01, p0 * 0.98])
+    got = _grads(spectral_nll, pts, a)
+    want = np.asarray(jax.vmap(jax.grad(_spectral_nll), in_axes=(0, None))(jnp.asarray(pts), a))
+    assert got.shape == want.shape == (3, 4)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.max(np.abs(want)))
