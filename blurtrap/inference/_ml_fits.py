@@ -19,6 +19,7 @@ from ._fixed import propagate as propagate_fixed
 from ._fixed import reduce as reduce_fixed
 from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
+from ._pooling import alone_estimates, disagreements, pooling_note
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
 from ._refusals import _check_fit, _check_relaxation_resolved, _held_sentence
 from ._result import FitError
@@ -41,7 +42,8 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                                         method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
-    pooled = (shared_k_note(layout, args.power / psd, args.weight, gof["p_value"])
+    pooled = (_pooled_note(recs, layout, model, args.power / psd, args.weight,
+                           gof["p_value"], fixed, f_range, excluded)
               or power_law_note(recs, layout, model, args, out.nll, gof["p_value"], fixed))
     if pooled:
         notes = [*notes, pooled]
@@ -100,6 +102,22 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
             f"{gof_p:.2g}; {shown}): recordings of different stiffness (another laser power, "
             "bead or height) pooled into one k give a k between theirs with errors far too "
             "small. Give each recording's laser_power, or fit k='per_recording'")
+
+
+def _pooled_note(recs, layout, model, ratio, weight, gof_p, fixed, f_range=None,
+                 excluded=None) -> str | None:
+    """With a failing joint goodness of fit over two or more recordings: the shared
+    parameters their own fits disagree on (:mod:`._pooling`), after
+    :func:`shared_k_note`'s spectral test for k; either, both, or None."""
+    k_note = shared_k_note(layout, ratio, weight, gof_p)
+    if len(recs) < 2 or not gof_p < _POOL_ALPHA:
+        return k_note
+    found = disagreements(layout, alone_estimates(recs, layout, model, f_range, excluded,
+                                                  fixed))
+    if k_note and "k" not in found and set(found) - {"k"}:
+        k_note = None  # the own k agree, another shared parameter does not: it is that
+    other = pooling_note(found, k_named=k_note is not None)
+    return "; ".join(n for n in (k_note, other) if n) or None
 
 
 def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | None:
@@ -234,7 +252,8 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
-    pooled = shared_k_note(layout, sargs.power / psd, sargs.weight, gof["p_value"])
+    pooled = _pooled_note(recs, layout, model, sargs.power / psd, sargs.weight,
+                          gof["p_value"], fixed)
     if not pooled and bool(wout.success):  # k = c P: tested on the Whittle objective
         pooled = power_law_note(recs, layout, model, sargs, wout.nll, gof["p_value"], fixed)
     if pooled:
@@ -245,7 +264,8 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
                                      gof["p_value"])
         if note:
             notes = [*notes, note]
-    extras = {"loglik": -float(out.nll)}
+    extras = {"loglik": -float(out.nll), "f": unpadded(sargs, sargs.f),
+              "ratio": unpadded(sargs, sargs.power / psd)}  # data/model, as Whittle's
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(nll, args, s_out, out, held,

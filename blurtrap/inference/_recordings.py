@@ -161,3 +161,47 @@ def _plausibility_notes(recs, res) -> list:
                     f"{best[0]!r} they would be in range: check the position unit")
     return [f"implausible: {shown} (a trapped bead in a liquid lies within these "
             f"ranges){hint or ': check the position unit and scale'}"]
+
+
+#: a calibration whose goodness of fit has p below this gets a note saying so (when no
+#: other note quotes the goodness of fit): a fit of a model the data contradict gives k,
+#: gamma and errors that may be far off (an independent pass found p = 0 with k 13-43 SE
+#: off and no note: an undeclared diode filter, a wrong exposure, repeated frames)
+MISFIT_ALPHA = 1e-3
+
+
+def misfit_note(res, notes) -> list:
+    """``[note]`` when ``res``' goodness of fit fails (p < :data:`MISFIT_ALPHA`) and none of
+    ``notes`` (all the result's notes) quotes the goodness of fit, else ``[]``."""
+    p = (res.gof or {}).get("p_value")
+    if not (isinstance(p, (float, int)) and p < MISFIT_ALPHA):
+        return []
+    if any("goodness of fit" in n for n in notes):
+        return []
+    pv = f"p = {p:.2g}" if p > 0 else "p < 1e-300"
+    return [f"the model does not fit the data (goodness of fit {pv}{_misfit_band(res)}): "
+            "k, gamma and their errors may be biased by an effect the model lacks (another "
+            "note may name it). bt.diagnose(data) ranks the effects that could explain the "
+            "misfit, and calibrate(..., model='standard+<effect>') adds one"]
+
+
+def _misfit_band(res) -> str:
+    """Where the data/model ratio of a spectral fit departs most from 1 (of 20 bands with
+    equal numbers of ordinates), or '' without the ratio."""
+    ex = res.extras or {}
+    if "f" not in ex or "ratio" not in ex:
+        return ""
+    f = np.ravel(np.asarray(ex["f"], dtype=float))
+    q = np.ravel(np.asarray(ex["ratio"], dtype=float))
+    if f.shape != q.shape:
+        return ""
+    ok = (f > 0) & (q > 0) & np.isfinite(q)  # padding of shorter recordings has ratio 0
+    if np.count_nonzero(ok) < 40:
+        return ""
+    order = np.argsort(f[ok])
+    f, q = f[ok][order], q[ok][order]
+    groups = np.array_split(np.arange(f.size), 20)
+    g = max(groups, key=lambda idx: idx.size * (float(np.mean(q[idx])) - 1.0) ** 2)
+    m = float(np.mean(q[g]))
+    return (f"; the largest misfit: the data {'above' if m > 1 else 'below'} the model by "
+            f"{abs(m - 1) * 100:.2g} % at {f[g[0]]:.4g}-{f[g[-1]]:.4g} Hz")

@@ -14,6 +14,7 @@ from ..physics import BOLTZMANN
 from ._allan import fit_allan
 from ._assemble import _assemble, _given_intervals
 from ._fit import chi2_sf
+from ._pooling import alone_estimates, disagreements, pooling_note
 from ._problems import rec_meta
 from ._result import LAB as _LAB_UNITS
 from ._result import CalibrationResult, FitError
@@ -127,6 +128,11 @@ def _fit_variance(recs, layout, model, method_name, notes):
                          "calibrate(..., method='likelihood')")
     except Exception:  # noqa: BLE001 - an advisory note only
         pass
+    # the method shares eps^2 (and gamma, and k across exposures): recordings whose own
+    # fits disagree on one bias it with no sign in its few degrees of freedom
+    pooled = pooling_note(disagreements(layout, alone_estimates(recs, layout, model)), False)
+    if pooled:
+        notes.append(f"{method_name}: {pooled}")
     return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
                      interval_source=_given_intervals(intervals))
 
