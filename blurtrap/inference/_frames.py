@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ._chi2 import f_sf
+from ._glitches import glitch_note
 from ._variance import empirical_variance_se
 
 
@@ -261,6 +262,9 @@ def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
         where = f"recording {i}" + (f" ({r.name})" if getattr(r, "name", None) else "")
         for msg, refused in histogram_checks(y, u, counts, where):
             (errors if refused else notes).append(msg)
+        glitch = glitch_note(y, where)
+        if glitch:
+            notes.append(glitch)
     if not drift_modelled:
         shift = mean_shift_sentence(recs, str(getattr(recs[0], "position_unit", "m")))
         if shift:
