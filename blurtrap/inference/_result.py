@@ -190,8 +190,11 @@ class CalibrationResult:
             ivs, kinds = self._wald_intervals()
             if self.interval_source is not None:
                 more, more_kinds = self.interval_source(self)
-                ivs.update(more)
-                kinds.update(more_kinds)
+                for n, iv in more.items():
+                    if all(math.isfinite(e) for e in iv):
+                        ivs[n], kinds[n] = iv, more_kinds[n]
+                    else:  # the profile did not converge: the Wald interval, labelled so
+                        kinds[n] += f" ({more_kinds[n]} did not converge)"
             object.__setattr__(self, "_interval_cache", (ivs, kinds))
             return ivs, kinds
         return self._interval_cache
@@ -207,7 +210,9 @@ class CalibrationResult:
     def interval_kinds(self) -> dict[str, str]:
         """How each interval of :attr:`intervals` was made: ``"wald"``, ``"profile"``, or
         ``"log-wald"`` (a positive parameter whose Wald interval would reach below 0 where
-        no profile is available: ``value exp(+-1.96 SE/value)``)."""
+        no profile is available: ``value exp(+-1.96 SE/value)``); ``"wald (profile did not
+        converge)"`` where a profile was wanted but one of its fits failed (an independent
+        pass found (nan, nan) there: k of records ~10 relaxation times long)."""
         return dict(self._interval_table()[1])
 
     @property
