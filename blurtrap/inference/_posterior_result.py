@@ -61,6 +61,13 @@ class Posterior:
     pointwise: Any = dataclasses.field(default=None, repr=False, compare=False)
 
     @property
+    def notes(self) -> tuple:
+        """The maximum-likelihood start's notes (:attr:`ml`): what the data preparation did
+        (lines subtracted, the detector) and what the fit found (a failing goodness of fit,
+        recordings that disagree): the posterior inherits them."""
+        return tuple(self.ml.notes)
+
+    @property
     def n_samples(self) -> int:
         return int(self.chain.shape[0] * self.chain.shape[1])
 
@@ -101,6 +108,7 @@ class Posterior:
         esss = ", ".join(f"{n} {e:.0f}" for n, e in self.ess.items())
         lines.append(f"  autocorrelation time [steps]: {taus}")
         lines.append(f"  effective sample size: {esss}")
+        lines += [f"  note (ML start): {n}" for n in self.notes]
         return "\n".join(lines)
 
     def __str__(self) -> str:  # pragma: no cover - convenience
