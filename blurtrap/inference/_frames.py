@@ -99,6 +99,22 @@ def _detrended_var(means: np.ndarray) -> np.ndarray:
     return np.sum(resid * resid, axis=1) / (b - 2)
 
 
+def segment_tau(seg) -> float | None:
+    """The correlation time [frames] of the detrended segments ``seg`` (n_seg, m): the first
+    lag at which their autocovariance (median over segments, by FFT) falls below 1/e of its
+    lag-1 value (white tracking or detector noise sits at lag 0 only, so lag 1 is the
+    reference); None when it does not within m/4 lags."""
+    m = seg.shape[1]
+    spec = np.fft.rfft(seg, n=2 * m, axis=1)
+    acov = np.median(np.fft.irfft(spec * np.conj(spec), axis=1)[:, : m // 4], axis=0) / m
+    if not acov[1] > 0:
+        return 0.0
+    below = np.flatnonzero(acov[1:] < acov[1] / math.e)
+    if below.size == 0:
+        return None
+    return float(below[0])  # lags from 1: the 1/e lag minus one, ~tau for a trap
+
+
 def mean_shift(y) -> dict | None:
     """Whether the mean position moves across the record (a step, or a drift), by batch
     means: the record is cut into 16 segments; each segment's own scatter of sub-block means
@@ -125,18 +141,9 @@ def mean_shift(y) -> dict | None:
     t_seg = np.arange(m) - 0.5 * (m - 1)
     seg = seg - seg.mean(axis=1, keepdims=True)
     seg = seg - np.outer(seg @ t_seg / float(t_seg @ t_seg), t_seg)
-    # the correlation time: the first lag at which the autocovariance (median over segments,
-    # by FFT) falls below 1/e of its lag-1 value (white tracking or detector noise sits at
-    # lag 0 only, so lag 1 is the reference); none within m/4 lags: no test
-    spec = np.fft.rfft(seg, n=2 * m, axis=1)
-    acov = np.median(np.fft.irfft(spec * np.conj(spec), axis=1)[:, : m // 4], axis=0) / m
-    if not acov[1] > 0:
-        tau = 0.0
-    else:
-        below = np.flatnonzero(acov[1:] < acov[1] / math.e)
-        if below.size == 0:
-            return None
-        tau = float(below[0])  # lags from 1: the 1/e lag minus one, ~tau for a trap
+    tau = segment_tau(seg)
+    if tau is None:
+        return None
     b = min(_SHIFT_SUB, int(m / (_SHIFT_SUB_TAU * max(tau, 1.0))))
     if b < 4:
         return None
@@ -269,6 +276,11 @@ def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
         shift = mean_shift_sentence(recs, str(getattr(recs[0], "position_unit", "m")))
         if shift:
             notes.append(shift[0].upper() + shift[1:])
+    from ._variance_shift import variance_shift_sentence  # it imports this module
+
+    spread = variance_shift_sentence(recs)
+    if spread:
+        notes.append(spread[0].upper() + spread[1:])
     if errors:
         if strict:
             # (the duplicate's own message says what to do)
