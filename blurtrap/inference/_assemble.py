@@ -45,6 +45,14 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
         notes = tuple(notes) + (_bound_note(at_bounds, conditional),)
     temps = {float(r.temperature) for r in recs}
+    if len(temps) > 1:
+        lo, hi = min(temps), max(temps)
+        notes = tuple(notes) + (
+            f"the recordings are at different temperatures ({lo:g}-{hi:g} K): the result's "
+            f"temperature, kT and D = kT/gamma use their mean {np.mean(list(temps)):g} K, "
+            "while k of each recording uses its own; one shared gamma assumes one viscosity "
+            f"(water's changes by ~{_viscosity_change(lo, hi):.0f} % between them), so "
+            "recordings at different temperatures are better calibrated apart",)
     if "drift_diffusion" in names:
         notes = tuple(notes) + (
             "drift_diffusion: its standard error is ~3x too small (half the drift power is the "
@@ -73,6 +81,13 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         extras=extras,
         interval_source=interval_source,
     )
+
+
+def _viscosity_change(lo: float, hi: float) -> float:
+    """Water's viscosity change between ``lo`` and ``hi`` [K], in % of the lower-T value."""
+    from ..physics import water_viscosity
+
+    return 100.0 * (1.0 - float(water_viscosity(hi)) / float(water_viscosity(lo)))
 
 
 def _bound_note(at_bounds, conditional) -> str:

@@ -22,13 +22,7 @@ from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_in
 from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
 from ._problems import make_layout
-from ._recordings import (
-    _bead_radii,
-    _plausibility_notes,
-    _stokes_notes,
-    as_recordings,
-    misfit_note,
-)
+from ._recordings import _bead_radii, _plausibility_notes, _stokes_notes, as_recordings, misfit_note
 from ._refusals import _check_psd_blocks, _no_temporal_information_message, known_friction_message
 from ._result import CalibrationResult, FitError
 from ._starts import moment_start

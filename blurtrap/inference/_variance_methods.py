@@ -111,6 +111,17 @@ def _fit_variance(recs, layout, model, method_name, notes):
         notes.append(f"{method_name}: the data do not bound {unbounded} within a factor 1000 "
                      "(weakly identified: exposures or powers too close, or alpha << 1)")
     extras: dict[str, Any] = {"intervals": intervals}
+    notes += _comparison_notes(recs, layout, model, method_name, p, prof, wald, extras)
+    return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
+                     interval_source=_given_intervals(intervals))
+
+
+
+def _comparison_notes(recs, layout, model, method_name, p, prof, wald, extras) -> list:
+    """The variance method's estimate against the joint likelihood on the same recordings
+    (how much smaller its errors are; ``extras["joint_se_ratio"]``), and the shared
+    parameters the recordings' own fits disagree on (:mod:`._pooling`)."""
+    notes: list[str] = []
     try:
         jse = _joint_likelihood_se(recs, layout, model, p)
         nk = 1 if layout.linear_power else layout.n_k
@@ -133,9 +144,7 @@ def _fit_variance(recs, layout, model, method_name, notes):
     pooled = pooling_note(disagreements(layout, alone_estimates(recs, layout, model)), False)
     if pooled:
         notes.append(f"{method_name}: {pooled}")
-    return _assemble(recs, layout, model, method_name, p, cov, gof, notes, extras,
-                     interval_source=_given_intervals(intervals))
-
+    return notes
 
 def _lab(name, value):
     """``value`` (SI) of parameter ``name`` as text in lab units."""

@@ -253,10 +253,12 @@ def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
     return (f"the motions along the two principal axes are correlated at lag 1 ({z[0]:+.1f} and "
             f"{z[1]:+.1f} standard errors), which a trap with one isotropic friction cannot "
             "produce: unequal x and y detector sensitivities (a per-axis gain; the positions "
-            "must be in one length unit on both axes), cross-talk between the channels, an "
-            "anisotropic friction (a non-spherical particle) or a drift common to both axes "
-            "couple them, and k1, k2, gamma and phi are then biased. Calibrate each axis's "
-            "sensitivity separately, remove the drift, or fit x and y alone")
+            "must be in one length unit on both axes), unequal tracking noise on x and y "
+            "(it tilts the principal axes of the frames away from the trap's), cross-talk "
+            "between the channels, an anisotropic friction (a non-spherical particle) or a "
+            "drift common to both axes couple them, and k1, k2, gamma and phi are then "
+            "biased. Calibrate each axis's sensitivity separately, remove the drift, or fit x "
+            "and y alone (calibrate on each axis: its own eps^2)")
 
 
 def _whittle_information(k, gamma, eps2, xy: XYRecording, noise: bool) -> np.ndarray:
