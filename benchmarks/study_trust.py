@@ -13,6 +13,7 @@ Outcome per case:
     python benchmarks/study_trust.py [--out FILE]      # ~5-10 min on 2 cores
     python benchmarks/study_trust.py --second          # the second pass's classes only
     python benchmarks/study_trust.py --third           # the third pass's (_trust_third.py)
+    python benchmarks/study_trust.py --fourth          # the fourth pass's (_trust_fourth.py)
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ import blurtrap as bt
 from blurtrap.inference import FitError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _trust_fourth import EXPECTED as FOURTH_EXPECTED  # noqa: E402
+from _trust_fourth import fourth_pass_cases  # noqa: E402
 from _trust_third import EXPECTED as THIRD_EXPECTED  # noqa: E402
 from _trust_third import third_pass_cases  # noqa: E402
 
@@ -256,7 +259,7 @@ EXPECTED = {  # the outcome each class must have; anything else is listed as a f
     "held": ("noted", "clear error"), "implausible:": "clear error", "implausible fit": "noted",
     "unused": "noted", "equipartition": "noted", "nonstationary": ("noted", "clear error"),
     "pooled": "noted", "duplicate": "clear error", "white frames": "clear error",
-    "batch": "honest", **THIRD_EXPECTED,
+    "batch": "honest", **THIRD_EXPECTED, **FOURTH_EXPECTED,
 }
 
 
@@ -267,16 +270,20 @@ def main(argv=None):
                     help="only the classes of the second independent pass (session 22)")
     ap.add_argument("--third", action="store_true",
                     help="only the classes of the third independent pass (session 23)")
+    ap.add_argument("--fourth", action="store_true",
+                    help="only the classes of the fourth independent pass (session 24)")
     a = ap.parse_args(argv)
     bt.enable_x64()
     t0 = time.time()
     rows = []
     gens = (offset_cases, detector_cases, unit_cases, batch_cases, json_cases,
-            second_pass_cases, third_pass_cases)
+            second_pass_cases, third_pass_cases, fourth_pass_cases)
     if a.second:
         gens = (second_pass_cases,)
     if a.third:
         gens = (third_pass_cases,)
+    if a.fourth:
+        gens = (fourth_pass_cases,)
     for gen in gens:
         for name, res in gen():
             want = next(v for k, v in EXPECTED.items() if name.startswith(k))
