@@ -45,8 +45,8 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
         notes = tuple(notes) + (_bound_note(at_bounds, conditional),)
     temps = {float(r.temperature) for r in recs}
-    if len(temps) > 1:
-        lo, hi = min(temps), max(temps)
+    lo, hi = min(temps), max(temps)
+    if len(temps) > 1 and _viscosity_change(lo, hi) > 1.0:  # (0.4 K apart in water)
         notes = tuple(notes) + (
             f"the recordings are at different temperatures ({lo:g}-{hi:g} K): the result's "
             f"temperature, kT and D = kT/gamma use their mean {np.mean(list(temps)):g} K, "

@@ -42,11 +42,10 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                                         method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
-    pooled = (_pooled_note(recs, layout, model, args.power / psd, args.weight,
-                           gof["p_value"], fixed, f_range, excluded)
-              or power_law_note(recs, layout, model, args, out.nll, gof["p_value"], fixed))
-    if pooled:
-        notes = [*notes, pooled]
+    notes = [*notes, *filter(None, (
+        _pooled_note(recs, layout, model, args.power / psd, args.weight, gof["p_value"], fixed,
+                     f_range, excluded),
+        power_law_note(recs, layout, model, args, out.nll, gof["p_value"], fixed)))]
     if fixed:
         note = held_consistency_note(spectral_nll, args, out.value, scale, layout.names, fixed,
                                      eqx.tree_at(lambda a: a.power, args, psd),
@@ -116,7 +115,8 @@ def _pooled_note(recs, layout, model, ratio, weight, gof_p, fixed, f_range=None,
                                                   fixed))
     if k_note and "k" not in found and set(found) - {"k"}:
         k_note = None  # the own k agree, another shared parameter does not: it is that
-    other = pooling_note(found, k_named=k_note is not None)
+    metres = str(getattr(recs[0], "position_unit", "m")) == "m"
+    other = pooling_note(found, k_note is not None, metres)
     return "; ".join(n for n in (k_note, other) if n) or None
 
 
@@ -252,20 +252,21 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
-    pooled = _pooled_note(recs, layout, model, sargs.power / psd, sargs.weight,
-                          gof["p_value"], fixed)
-    if not pooled and bool(wout.success):  # k = c P: tested on the Whittle objective
-        pooled = power_law_note(recs, layout, model, sargs, wout.nll, gof["p_value"], fixed)
-    if pooled:
-        notes = [*notes, pooled]
+    notes = [*notes, *filter(None, (
+        _pooled_note(recs, layout, model, sargs.power / psd, sargs.weight, gof["p_value"],
+                     fixed),
+        # k = c P: tested on the Whittle objective
+        power_law_note(recs, layout, model, sargs, wout.nll, gof["p_value"], fixed)
+        if bool(wout.success) else None))]
     if fixed:
         note = held_consistency_note(nll, args, out.value, moment, names, fixed,
                                      eqx.tree_at(lambda a: a.power, sargs, psd),
                                      gof["p_value"])
         if note:
             notes = [*notes, note]
-    extras = {"loglik": -float(out.nll), "f": unpadded(sargs, sargs.f),
-              "ratio": unpadded(sargs, sargs.power / psd)}  # data/model, as Whittle's
+    extras = {"loglik": -float(out.nll), "f": unpadded(sargs, sargs.f),  # as Whittle's:
+              "ratio": unpadded(sargs, sargs.power / psd),  # data/model and its weights
+              "weight": unpadded(sargs, sargs.weight)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(nll, args, s_out, out, held,

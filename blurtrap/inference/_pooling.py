@@ -38,7 +38,9 @@ _WHY = {
 _WHY["k"] = ("the stiffness differs between recordings that share one k (another laser power, "
              "bead or height), but the joint fit shares it. Give each recording's "
              "laser_power, or fit k='per_recording'")
-_LAB = {"tracking_var": (1e18, "nm^2"), "gamma": (1e9, "pN s/um"), "k": (1e3, "pN/nm")}
+#: effect parameters one recording alone cannot determine (they relate recordings at
+#: different powers): models with them get no per-recording fits
+_JOINT_ONLY = ("power_offset", "heating")
 
 
 def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None):
@@ -47,6 +49,8 @@ def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None
     Held parameters stay held (their entries are left out)."""
     from ._ml_fits import _fit_held  # _ml_fits imports this module
 
+    if any(n.startswith(_JOINT_ONLY) for n in layout.extra_names):
+        return [None] * len(recs)
     out = []
     for r in recs:
         lay = make_layout([r], "shared", layout.noise, layout.extra_names)
@@ -57,13 +61,23 @@ def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None
         except (ValueError, FloatingPointError):
             out.append(None)
             continue
-        if not bool(res.converged):
+        # a fit whose errors are conditional on a bound (too small), or that misfits its
+        # own recording (a misfit shared by all moves each differently), tests nothing here
+        if not bool(res.converged) or res.conditional or _own_gof(res.value, args) < POOL_ALPHA:
             out.append(None)
             continue
         val, se = np.asarray(res.value, float), np.sqrt(np.abs(np.diag(np.asarray(res.cov))))
         out.append({n: (float(v), float(s)) for n, v, s in zip(lay.names, val, se)
                     if not (fixed and n in fixed)})
     return out
+
+
+def _own_gof(p, args) -> float:
+    """The goodness-of-fit p of one recording's own fit ``p`` on its ``args``."""
+    from ._spectral import _psd_jit, spectral_gof
+
+    psd = _psd_jit(p, args)
+    return float(spectral_gof(args.power / psd, args.weight, int(p.shape[0]))["p_value"])
 
 
 def _cochran(pairs):
@@ -98,19 +112,25 @@ def disagreements(layout, alone) -> dict:
     return out
 
 
-def pooling_note(found: dict, k_named: bool) -> str | None:
+def pooling_note(found: dict, k_named: bool, metres: bool = True) -> str | None:
     """The note naming the shared parameters the recordings disagree on (k only unless
     ``k_named``: :func:`._ml_fits.shared_k_note` named it already), with each recording's
-    own estimate; None when there is none."""
+    own estimate (lab units for positions in metres, else SI in the positions' unit); None
+    when there is none."""
+    from ..effects import QUANTITIES
+
     named = [n for n in ("tracking_var", "gamma") + (() if k_named else ("k",)) if n in found]
     if not named:
         return None
     parts = []
     for n in named:
         q, dof, p, rows = found[n]
-        f, unit = _LAB[n]
+        f, unit = (QUANTITIES[n].lab_factor, QUANTITIES[n].lab_unit) if metres else \
+            (1.0, "SI, in the positions' unit")
         own = ", ".join(f"{i}: {v * f:.4g} +- {s * f:.2g}" for i, v, s in rows)
         parts.append(f"on {n} (each recording alone, {unit}: {own}; heterogeneity "
                      f"chi^2 = {q:.4g}, {dof} dof, p = {p:.2g}): {_WHY[n]}")
     return ("the recordings fitted together disagree " + "; and ".join(parts)
-            + ". The joint k, gamma and their errors are biased by the shared value")
+            + ". The joint k, gamma and their errors are biased by the shared value (or a "
+            "misfit of the model acts differently on the recordings: check each one's own "
+            "fit and diagnose)")

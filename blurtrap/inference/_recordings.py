@@ -187,15 +187,15 @@ def misfit_note(res, notes) -> list:
 
 def _misfit_band(res) -> str:
     """Where the data/model ratio of a spectral fit departs most from 1 (of 20 bands with
-    equal numbers of ordinates), or '' without the ratio."""
+    equal numbers of fitted ordinates), or '' without the ratio and its weights."""
     ex = res.extras or {}
-    if "f" not in ex or "ratio" not in ex:
+    if not all(name in ex for name in ("f", "ratio", "weight")):
         return ""
-    f = np.ravel(np.asarray(ex["f"], dtype=float))
-    q = np.ravel(np.asarray(ex["ratio"], dtype=float))
-    if f.shape != q.shape:
+    f, q, w = (np.ravel(np.asarray(ex[name], dtype=float)) for name in ("f", "ratio", "weight"))
+    if not f.shape == q.shape == w.shape:
         return ""
-    ok = (f > 0) & (q > 0) & np.isfinite(q)  # padding of shorter recordings has ratio 0
+    # fitted ordinates only: padding, excluded ranges and left-out spikes have weight 0
+    ok = (w > 0) & (f > 0) & (q > 0) & np.isfinite(q)
     if np.count_nonzero(ok) < 40:
         return ""
     order = np.argsort(f[ok])

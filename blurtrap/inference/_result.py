@@ -211,8 +211,8 @@ class CalibrationResult:
         """How each interval of :attr:`intervals` was made: ``"wald"``, ``"profile"``, or
         ``"log-wald"`` (a positive parameter whose Wald interval would reach below 0 where
         no profile is available: ``value exp(+-1.96 SE/value)``); ``"wald (profile did not
-        converge)"`` where a profile was wanted but one of its fits failed (an independent
-        pass found (nan, nan) there: k of records ~10 relaxation times long)."""
+        converge)"`` (or ``"log-wald (...)"``) where a profile was wanted but one of its fits
+        failed (k of a record ~10 relaxation times long)."""
         return dict(self._interval_table()[1])
 
     @property

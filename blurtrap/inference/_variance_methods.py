@@ -141,7 +141,12 @@ def _comparison_notes(recs, layout, model, method_name, p, prof, wald, extras) -
         pass
     # the method shares eps^2 (and gamma, and k across exposures): recordings whose own
     # fits disagree on one bias it with no sign in its few degrees of freedom
-    pooled = pooling_note(disagreements(layout, alone_estimates(recs, layout, model)), False)
+    try:
+        metres = str(getattr(recs[0], "position_unit", "m")) == "m"
+        pooled = pooling_note(disagreements(layout, alone_estimates(recs, layout, model)),
+                              False, metres)
+    except Exception:  # noqa: BLE001 - an advisory note only
+        pooled = None
     if pooled:
         notes.append(f"{method_name}: {pooled}")
     return notes

@@ -209,3 +209,33 @@ def test_posterior_uses_the_fits_prepared_recordings():
     lo, hi = post.interval("gamma", 0.995)
     assert lo < GAMMA < hi, (lo, hi)
     assert any("50" in n for n in post.notes) and post.notes == post.ml.notes
+
+
+def test_pooled_gamma_disagreement_is_quoted_in_lab_units():
+    """Two recordings of one k and gamma G and 2G (two beads) pooled: the note names gamma,
+    each recording's own value in pN s/um (the first version printed them 1000x)."""
+    recs = [_rec(_frames(32768, 60)), _rec(circulant_frames(K, 2 * GAMMA, DT, DT, EPS2, 32768,
+                                                            61, temperature=T))]
+    res = bt.calibrate(bt.RecordingSet(recs))
+    (note,) = [n for n in res.notes if "disagree on gamma" in n]
+    own = [float(s.split(": ")[1].split(" +-")[0]) for s in
+           note.split("pN s/um: ")[1].split(";")[0].split(", ")]
+    assert own[0] == pytest.approx(GAMMA * 1e6, rel=0.2)
+    assert own[1] == pytest.approx(2 * GAMMA * 1e6, rel=0.2)
+
+
+def test_misfit_band_ignores_ordinates_of_weight_zero():
+    """Padding of a shorter recording, excluded ranges and left-out spikes have weight 0:
+    the band of the largest misfit is found among the fitted ordinates only."""
+    from blurtrap.inference._recordings import _misfit_band
+
+    f = np.tile(np.linspace(1.0, 750.0, 1000), (2, 1))
+    ratio = np.ones_like(f)
+    weight = np.ones_like(f)
+    ratio[0, 100:150] = 1.5  # the real misfit: 75-112 Hz
+    ratio[1, 500:], weight[1, 500:] = 40.0, 0.0  # padding of the second recording
+    res = dataclasses.replace(bt.calibrate(_rec(_frames(4096, 7)), likelihood="whittle"),
+                              extras={"f": f, "ratio": ratio, "weight": weight})
+    band = _misfit_band(res)
+    lo, hi = (float(v) for v in band.split(" at ")[1].split(" Hz")[0].split("-"))
+    assert "above" in band and 60 < lo < hi < 130, band
