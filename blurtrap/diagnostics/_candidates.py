@@ -141,13 +141,16 @@ def _lr_p_value(dll: float, dof: int) -> float:
     return p
 
 
-def _screen(recs, mdl, k, name: str, effects: tuple, warm: dict):
+def _screen(recs, mdl, k, name: str, effects: tuple, warm: dict, base_nll: float):
     """Screening refit of ``mdl`` + ``effects`` (warm start; flag effects, which can move k
-    and gamma far, also from the closed-form start, keeping the better optimum). Returns the
-    model and the optimum."""
+    and gamma far, also from the closed-form start, keeping the better optimum; so does a
+    warm refit that did not converge or ended above the base fit ``base_nll``, which a
+    nested model cannot: a poor start, e.g. a held friction's value on positions in volts).
+    Returns the model and the optimum."""
     test_model = mdl.add(*effects)
     params, nll1, gof1, ok = screen(recs, test_model, k, start=warm)
-    if name in COUPLED_GROUPS or EFFECTS[name].kind == "flag":
+    stuck = not ok or nll1 > base_nll + 1e-9 * (1.0 + abs(base_nll))
+    if stuck or name in COUPLED_GROUPS or EFFECTS[name].kind == "flag":
         # adding a core effect can move k and gamma far from the misspecified base
         # fit: also try the closed-form start and keep the better optimum
         cold = screen(recs, test_model, k, start=None)
@@ -187,7 +190,8 @@ def _likelihood_candidate(recs, mdl, k, base, name: str, warm: dict, effect=None
     effects, line = _candidate_effects(recs, base, name, effect)
     try:
         test_model, params, nll1, gof1, ok = _screen(recs, mdl, k, name, effects,
-                                                     _object_start(warm, effects))
+                                                     _object_start(warm, effects),
+                                                     float(base.extras["nll"]))
     except (FitError, ValueError) as exc:
         return Candidate(name, None, 0, 1.0, None, f"refit failed: {exc}"), None
     dof = len(params) - len(base.param_names)

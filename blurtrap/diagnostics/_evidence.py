@@ -46,7 +46,11 @@ _HIGH_F = {"motion_blur": ("deficit rising toward fs/2 (motion blur)", False),
                "floor", None),
            "tracking_noise": ("flat excess floor (tracking noise)", True),
            "exposure_kernel": ("high-frequency shape unlike sinc^2 (exposure kernel)", None),
-           "detector_filter": ("high-frequency low-pass deficit (detector filter)", False),
+           # a filter with an instantaneous part is a shape: the base fit's tracking noise
+           # floor lifts the band near Nyquist while the middle falls (0.71 at 0.1-0.25 fs,
+           # 1.09 near Nyquist: an independent pass)
+           "detector_filter": ("high-frequency shape of a low-pass filter (detector filter)",
+                               None),
            "hydrodynamics": ("high-frequency shape of frequency-dependent friction", None)}
 
 
