@@ -239,3 +239,15 @@ def test_misfit_band_ignores_ordinates_of_weight_zero():
     band = _misfit_band(res)
     lo, hi = (float(v) for v in band.split(" at ")[1].split(" Hz")[0].split("-"))
     assert "above" in band and 60 < lo < hi < 130, band
+
+
+@pytest.mark.parametrize("kw", [{"method": "likelihood", "likelihood": "exact"},
+                                {"method": "psd"}], ids=["exact", "psd"])
+def test_stiffness_and_friction_at_their_bound_are_refused(kw):
+    """A very stiff trap (W = 48 tau) under 20 nm tracking noise: the fits ran k and gamma
+    to their bound 0 and returned NaN errors with no refusal (benchmarks/study_robustness.py
+    counted them as 'NaN'); now a FitError names dt >> tau."""
+    g = 6 * math.pi * 9.5e-4 * 0.765e-6
+    x = circulant_frames(1e-3, g, DT, DT, 4e-16, 65536, 0, temperature=T)
+    with pytest.raises(bt.FitError, match="dt >> tau"):
+        bt.calibrate(_rec(x), **kw)
