@@ -42,22 +42,29 @@ def child_script(call: str, record: str) -> str:
     return _TEMPLATE % {"call": call, "record": record}
 
 
-def run_child(code_root: pathlib.Path, data: pathlib.Path, calls: int, timeout: float,
-              script: str) -> dict:
-    """Run `script` (from :func:`child_script`) on `data` with ``PYTHONPATH=code_root`` and
-    no persistent compilation cache; the parsed RESULT plus ``process_s`` (the whole child),
-    or ``{"error": ...}`` (a timeout or the end of stderr)."""
+def run_source(code_root: pathlib.Path, script: str, args=(), timeout: float | None = None):
+    """Run the Python source `script` with ``args`` in a fresh process against the package
+    at ``code_root`` (``PYTHONPATH``, cwd; no persistent compilation cache): the JSON of its
+    ``RESULT ...`` line, or ``{"error": ...}`` (a timeout or the end of stderr)."""
     env = dict(os.environ, PYTHONPATH=str(code_root), JAX_ENABLE_X64="1")
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    t0 = time.perf_counter()
     try:
-        proc = subprocess.run([sys.executable, "-c", script, str(data), str(calls)], env=env,
+        proc = subprocess.run([sys.executable, "-c", script, *map(str, args)], env=env,
                               capture_output=True, text=True, timeout=timeout, cwd=code_root)
     except subprocess.TimeoutExpired:
         return {"error": f"timeout after {timeout:.0f} s"}
     line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")]
     if not line:
         return {"error": proc.stderr[-2000:]}
-    out = json.loads(line[0][7:])
-    out["process_s"] = time.perf_counter() - t0
+    return json.loads(line[0][7:])
+
+
+def run_child(code_root: pathlib.Path, data: pathlib.Path, calls: int, timeout: float,
+              script: str) -> dict:
+    """Run `script` (from :func:`child_script`) on `data` (:func:`run_source`); the parsed
+    RESULT plus ``process_s`` (the whole child), or ``{"error": ...}``."""
+    t0 = time.perf_counter()
+    out = run_source(code_root, script, (data, calls), timeout)
+    if "error" not in out:
+        out["process_s"] = time.perf_counter() - t0
     return out

@@ -21,8 +21,8 @@ import json
 import os
 import pathlib
 import platform
-import subprocess
-import sys
+
+from _child import run_source
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -61,17 +61,6 @@ print("RESULT " + json.dumps(rows))
 """
 
 
-def run_tree(tree: pathlib.Path, n0: int, n1: int):
-    env = dict(os.environ, PYTHONPATH=str(tree), JAX_ENABLE_X64="1")
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    proc = subprocess.run([sys.executable, "-c", _CHILD, json.dumps([n0, n1])], env=env,
-                          capture_output=True, text=True, cwd=tree)
-    line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")]
-    if not line:
-        return {"error": proc.stderr[-3000:]}
-    return json.loads(line[0][7:])
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--base", help="another tree of the package (the 'before')")
@@ -86,7 +75,7 @@ def main():
     print("| tree | call | frames | s | XLA compilations | compile s | k [pN/nm] |")
     print("|---|---|---|---|---|---|---|")
     for label, tree in trees:
-        out = run_tree(tree, n0, n1)
+        out = run_source(tree, _CHILD, (json.dumps([n0, n1]),))
         if isinstance(out, dict):
             print(f"| {label} | error: {out['error'][-300:]!r} |")
             continue
