@@ -45,13 +45,14 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
         notes = tuple(notes) + (_bound_note(at_bounds, conditional),)
     temps = {float(r.temperature) for r in recs}
-    lo, hi = min(temps), max(temps)
-    if len(temps) > 1 and _viscosity_change(lo, hi) > 1.0:  # (0.4 K apart in water)
+    temperature = float(np.mean(list(temps)))  # one value, or the mean of the recordings'
+    change = _viscosity_change(min(temps), max(temps)) if len(temps) > 1 else 0.0
+    if change > 1.0:  # (0.4 K apart in water)
         notes = tuple(notes) + (
-            f"the recordings are at different temperatures ({lo:g}-{hi:g} K): the result's "
-            f"temperature, kT and D = kT/gamma use their mean {np.mean(list(temps)):g} K, "
-            "while k of each recording uses its own; one shared gamma assumes one viscosity "
-            f"(water's changes by ~{_viscosity_change(lo, hi):.0f} % between them), so "
+            f"the recordings are at different temperatures ({min(temps):g}-{max(temps):g} "
+            f"K): the result's temperature, kT and D = kT/gamma use their mean "
+            f"{temperature:g} K, while k of each recording uses its own; one shared gamma "
+            f"assumes one viscosity (water's changes by ~{change:.0f} % between them), so "
             "recordings at different temperatures are better calibrated apart",)
     if "drift_diffusion" in names:
         notes = tuple(notes) + (
@@ -69,7 +70,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         param_names=tuple(names),
         values=values,
         covariance=cov,
-        temperature=float(recs[0].temperature) if len(temps) == 1 else float(np.mean(list(temps))),
+        temperature=temperature,
         k_per_recording=np.asarray(k_rec, dtype=float),
         k_per_recording_err=np.asarray(k_err, dtype=float),
         gof=gof,

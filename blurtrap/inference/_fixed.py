@@ -127,11 +127,11 @@ def _grads(nll, pts, args) -> np.ndarray:
     padded = jnp.asarray(np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)]))
     fn = _grad_fn(nll)
     if _chunked.objective_chunkable(nll, args):  # a sum over ordinates: a new length
-        out = sum(np.asarray(fn(padded, c), dtype=float)  # compiles nothing
-                  for c in _chunked.ordinate_chunks(args))
+        out = np.sum([np.asarray(fn(padded, c), dtype=float)  # compiles nothing
+                      for c in _chunked.ordinate_chunks(args)], axis=0)
     else:
         out = np.asarray(fn(padded, args), dtype=float)
-    return np.asarray(out)[:len(pts)]
+    return out[:len(pts)]
 
 
 def propagate(nll, args, value, cov, names, fixed: dict, rel_step=1e-4):

@@ -178,10 +178,11 @@ def mean_shift(y) -> dict | None:
             "significant": bool(p < _SHIFT_ALPHA and spread > _SHIFT_MIN_SPREAD * std)}
 
 
-def mean_shift_sentence(recs, unit: str = "m") -> str:
-    """A sentence naming a step or drift of the mean position ('' when there is none)."""
-    for i, r in enumerate(recs):
-        t = mean_shift(r.positions)
+def mean_shift_sentence(recs, unit: str = "m", tests=None) -> str:
+    """A sentence naming a step or drift of the mean position ('' when there is none);
+    ``tests``: the recordings' :func:`mean_shift` results if the caller has them."""
+    tests = tests if tests is not None else [mean_shift(r.positions) for r in recs]
+    for i, t in enumerate(tests):
         if t is None or not t["significant"]:
             continue
         kind = (f"a step: the mean jumps by {t['jump']:.3g} {unit} near frame {t['at']}"
@@ -272,15 +273,14 @@ def _inspect_frames(recs, strict: bool, drift_modelled: bool = False) -> list:
         glitch = glitch_note(y, where)
         if glitch:
             notes.append(glitch)
-    if not drift_modelled:
-        shift = mean_shift_sentence(recs, str(getattr(recs[0], "position_unit", "m")))
-        if shift:
-            notes.append(shift[0].upper() + shift[1:])
     from ._variance_shift import variance_shift_sentence  # it imports this module
 
-    spread = variance_shift_sentence(recs)
-    if spread:
-        notes.append(spread[0].upper() + spread[1:])
+    tests = [mean_shift(r.positions) for r in recs]
+    unit = str(getattr(recs[0], "position_unit", "m"))
+    for found in ("" if drift_modelled else mean_shift_sentence(recs, unit, tests),
+                  variance_shift_sentence(recs, tests)):
+        if found:
+            notes.append(found[0].upper() + found[1:])
     if errors:
         if strict:
             # (the duplicate's own message says what to do)

@@ -21,7 +21,7 @@ from ._irregular import any_irregular, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._pooling import alone_estimates, disagreements, pooling_note
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
-from ._refusals import _check_fit, _check_relaxation_resolved, _held_sentence
+from ._refusals import _check_fit, _check_relaxation_resolved, _held_sentence, _unit
 from ._result import FitError
 from ._screen_fit import fit_nll_only
 from ._spectral import _psd_jit, _spectral_args, spectral_gof, unpadded
@@ -42,10 +42,8 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
                                         method_name, strict, recs)
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
-    notes = [*notes, *filter(None, (
-        _pooled_note(recs, layout, model, args.power / psd, args.weight, gof["p_value"], fixed,
-                     f_range, excluded),
-        power_law_note(recs, layout, model, args, out.nll, gof["p_value"], fixed)))]
+    notes = [*notes, *_pooling_notes(recs, layout, model, args, psd, out.nll, gof["p_value"],
+                                     fixed, f_range, excluded)]
     if fixed:
         note = held_consistency_note(spectral_nll, args, out.value, scale, layout.names, fixed,
                                      eqx.tree_at(lambda a: a.power, args, psd),
@@ -103,21 +101,25 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
             "small. Give each recording's laser_power, or fit k='per_recording'")
 
 
-def _pooled_note(recs, layout, model, ratio, weight, gof_p, fixed, f_range=None,
-                 excluded=None) -> str | None:
-    """With a failing joint goodness of fit over two or more recordings: the shared
-    parameters their own fits disagree on (:mod:`._pooling`), after
-    :func:`shared_k_note`'s spectral test for k; either, both, or None."""
-    k_note = shared_k_note(layout, ratio, weight, gof_p)
-    if len(recs) < 2 or not gof_p < _POOL_ALPHA:
-        return k_note
-    found = disagreements(layout, alone_estimates(recs, layout, model, f_range, excluded,
-                                                  fixed))
-    if k_note and "k" not in found and set(found) - {"k"}:
-        k_note = None  # the own k agree, another shared parameter does not: it is that
-    metres = str(getattr(recs[0], "position_unit", "m")) == "m"
-    other = pooling_note(found, k_note is not None, metres)
-    return "; ".join(n for n in (k_note, other) if n) or None
+def _pooling_notes(recs, layout, model, args, psd, whittle_nll, gof_p, fixed, f_range=None,
+                   excluded=None) -> list[str]:
+    """The joint fit's notes on what its recordings share, when its goodness of fit
+    ``gof_p`` fails: :func:`shared_k_note`'s spectral test for k and the shared parameters
+    the recordings' own fits disagree on (:mod:`._pooling`; the first dropped when the own
+    k agree and another parameter does not), and with ``k = c P`` the likelihood-ratio test
+    against one k per power on the Whittle objective at ``whittle_nll`` (None: not run)."""
+    ratio = args.power / psd
+    k_note = shared_k_note(layout, ratio, args.weight, gof_p)
+    other = None
+    if len(recs) >= 2 and gof_p < _POOL_ALPHA:
+        found = disagreements(layout, alone_estimates(recs, layout, model, f_range, excluded,
+                                                      fixed))
+        if k_note and "k" not in found and set(found) - {"k"}:
+            k_note = None
+        other = pooling_note(found, k_note is not None, recs)
+    power = None if whittle_nll is None else \
+        power_law_note(recs, layout, model, args, whittle_nll, gof_p, fixed)
+    return [n for n in ("; ".join(n for n in (k_note, other) if n), power) if n]
 
 
 def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | None:
@@ -142,7 +144,7 @@ def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | 
     p = float(chi2_sf(max(lr, 0.0), dof))
     if not p < _POOL_ALPHA:
         return None
-    metres = str(getattr(recs[0], "position_unit", "m")) == "m"
+    metres = _unit(recs) == "m"
     ks = ", ".join(f"{lab}: {float(v) * 1e3:.4g}" for lab, v in
                    zip(alt.k_labels, np.asarray(out.value)[: alt.n_k]))
     return (f"k = c P does not fit these recordings: one k per power fits better by a "
@@ -252,12 +254,9 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
-    notes = [*notes, *filter(None, (
-        _pooled_note(recs, layout, model, sargs.power / psd, sargs.weight, gof["p_value"],
-                     fixed),
-        # k = c P: tested on the Whittle objective
-        power_law_note(recs, layout, model, sargs, wout.nll, gof["p_value"], fixed)
-        if bool(wout.success) else None))]
+    notes = [*notes, *_pooling_notes(recs, layout, model, sargs, psd,
+                                     wout.nll if bool(wout.success) else None,
+                                     gof["p_value"], fixed)]
     if fixed:
         note = held_consistency_note(nll, args, out.value, moment, names, fixed,
                                      eqx.tree_at(lambda a: a.power, sargs, psd),

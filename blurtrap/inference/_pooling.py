@@ -34,10 +34,10 @@ _WHY = {
               "above the surface, another temperature or viscosity), but the joint fit "
               "shares one gamma. Calibrate each recording alone, or pool only recordings of "
               "one bead at one height"),
+    "k": ("the stiffness differs between recordings that share one k (another laser power, "
+          "bead or height), but the joint fit shares it. Give each recording's laser_power, "
+          "or fit k='per_recording'"),
 }
-_WHY["k"] = ("the stiffness differs between recordings that share one k (another laser power, "
-             "bead or height), but the joint fit shares it. Give each recording's "
-             "laser_power, or fit k='per_recording'")
 #: effect parameters one recording alone cannot determine (they relate recordings at
 #: different powers): models with them get no per-recording fits
 _JOINT_ONLY = ("power_offset", "heating")
@@ -112,13 +112,15 @@ def disagreements(layout, alone) -> dict:
     return out
 
 
-def pooling_note(found: dict, k_named: bool, metres: bool = True) -> str | None:
-    """The note naming the shared parameters the recordings disagree on (k only unless
-    ``k_named``: :func:`._ml_fits.shared_k_note` named it already), with each recording's
-    own estimate (lab units for positions in metres, else SI in the positions' unit); None
-    when there is none."""
+def pooling_note(found: dict, k_named: bool, recs) -> str | None:
+    """The note naming the shared parameters the recordings ``recs`` disagree on (k only
+    unless ``k_named``: :func:`._ml_fits.shared_k_note` named it already), with each
+    recording's own estimate (lab units for positions in metres, else SI in the positions'
+    unit); None when there is none."""
     from ..effects import QUANTITIES
+    from ._refusals import _unit
 
+    metres = _unit(recs) == "m"
     named = [n for n in ("tracking_var", "gamma") + (() if k_named else ("k",)) if n in found]
     if not named:
         return None

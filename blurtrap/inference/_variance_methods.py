@@ -116,7 +116,6 @@ def _fit_variance(recs, layout, model, method_name, notes):
                      interval_source=_given_intervals(intervals))
 
 
-
 def _comparison_notes(recs, layout, model, method_name, p, prof, wald, extras) -> list:
     """The variance method's estimate against the joint likelihood on the same recordings
     (how much smaller its errors are; ``extras["joint_se_ratio"]``), and the shared
@@ -142,14 +141,14 @@ def _comparison_notes(recs, layout, model, method_name, p, prof, wald, extras) -
     # the method shares eps^2 (and gamma, and k across exposures): recordings whose own
     # fits disagree on one bias it with no sign in its few degrees of freedom
     try:
-        metres = str(getattr(recs[0], "position_unit", "m")) == "m"
         pooled = pooling_note(disagreements(layout, alone_estimates(recs, layout, model)),
-                              False, metres)
+                              False, recs)
     except Exception:  # noqa: BLE001 - an advisory note only
         pooled = None
     if pooled:
         notes.append(f"{method_name}: {pooled}")
     return notes
+
 
 def _lab(name, value):
     """``value`` (SI) of parameter ``name`` as text in lab units."""

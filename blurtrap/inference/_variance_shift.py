@@ -45,15 +45,15 @@ def variance_shift(y) -> dict | None:
     return out
 
 
-def variance_shift_sentence(recs) -> str:
+def variance_shift_sentence(recs, tests=None) -> str:
     """A sentence naming a change of the position variance ('' when there is none, or when
-    the record's mean moves: that has its own note)."""
-    for i, r in enumerate(recs):
-        y = np.asarray(r.positions, dtype=float)
-        shift = mean_shift(y)
+    the record's mean moves: that has its own note); ``tests``: the recordings'
+    :func:`._frames.mean_shift` results if the caller has them."""
+    tests = tests if tests is not None else [mean_shift(r.positions) for r in recs]
+    for i, (r, shift) in enumerate(zip(recs, tests)):
         if shift is not None and shift["significant"]:
             continue
-        t = variance_shift(y)
+        t = variance_shift(r.positions)
         if t is None or not t["significant"]:
             continue
         where = (f"; it changes most near frame {t['at']}" if t["step"] else "")

@@ -208,7 +208,8 @@ def test_posterior_uses_the_fits_prepared_recordings():
         post = bt.sample_posterior(rec, n_steps=300, n_walkers=8)
     lo, hi = post.interval("gamma", 0.995)
     assert lo < GAMMA < hi, (lo, hi)
-    assert any("50" in n for n in post.notes) and post.notes == post.ml.notes
+    assert any(n.startswith("lines:") and "at 50 Hz" in n for n in post.notes)
+    assert post.notes == post.ml.notes
 
 
 def test_pooled_gamma_disagreement_is_quoted_in_lab_units():

@@ -20,13 +20,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _simconfig import DT, GAMMA
+from _simconfig import DT, GAMMA, assert_chunk_sums_are_the_whole, frames, rec
 
 import blurtrap as bt
 from blurtrap.inference import _chunked, _problems
 from blurtrap.inference._irregular import irregular_nll, make_irregular_args
 from blurtrap.inference._models import get_model
-from blurtrap.inference._newton import SafeguardedNewton, autodiff_pass
 from blurtrap.inference._problems import (
     _spectral_nll,
     bucket_length,
@@ -50,16 +49,6 @@ def buckets(monkeypatch):
     def set_(on):
         monkeypatch.setattr(_problems, "BUCKET_STEPS", STEPS if on else None)
     return set_
-
-
-def frames(n, seed, k=2e-5):
-    x = bt.simulate(k, GAMMA, DT, DT, n, key=jax.random.key(seed), method="exact_frames",
-                    tracking_std=2e-9)
-    return np.asarray(x, dtype=np.float64).ravel()
-
-
-def rec(y, **kw):
-    return bt.Recording(y, frame_interval=DT, exposure=DT, **kw)
 
 
 def test_bucket_length_is_a_small_set_of_sizes(monkeypatch):
@@ -156,18 +145,6 @@ def test_new_length_in_the_same_bucket_does_not_recompile(compiles, buckets, kw,
     assert compiles.names != []
 
 
-def _assert_chunk_sums_are_the_whole(chunks, x, scale, a):
-    """The per-chunk value, gradient and Hessian summed over ``chunks`` equal JAX autodiff of
-    the whole objective of ``a`` at ``x`` (1e-11 of the largest entry)."""
-    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
-    for c in chunks:
-        acc = _chunked._chunk_pass(spectral_nll, x, scale, c, acc)
-    ref = eqx.filter_jit(autodiff_pass(_spectral_nll))(x, scale, a)
-    for got, want in zip(acc, ref):
-        got, want = np.asarray(got), np.asarray(want)
-        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
-
-
 # ------------------------------------------------------------------------------------------
 # The default Whittle fit in fixed-size ordinate chunks (blurtrap.inference._chunked)
 # ------------------------------------------------------------------------------------------
@@ -188,7 +165,7 @@ def test_chunk_sums_equal_autodiff_of_the_whole_objective():
     assert len(chunks) == 2 and all(c.f.shape == (2, 16384) for c in chunks)
     scale = jnp.asarray([2.1e-5, 1.9e-5, 1.05 * GAMMA, 5e-18])
     x = jnp.asarray([0.03, -0.02, 0.01, 0.2])
-    _assert_chunk_sums_are_the_whole(chunks, x, scale, a)
+    assert_chunk_sums_are_the_whole(spectral_nll, _spectral_nll, chunks, x, scale, a)
 
 
 def test_binned_ordinates_equal_the_jax_grouping():
@@ -288,7 +265,7 @@ def test_effect_chunk_sums_equal_autodiff_of_the_whole_objective(model, spans):
     if model.endswith("hydrodynamics"):
         scale = scale.at[4:].set(1.5e-6)
     x = jnp.asarray(np.linspace(0.03, -0.02, n))
-    _assert_chunk_sums_are_the_whole(chunks, x, scale, a)
+    assert_chunk_sums_are_the_whole(spectral_nll, _spectral_nll, chunks, x, scale, a)
     psd = _chunked.model_psd_in_chunks(eqx.filter_jit(_problems.spectral_model_psd),
                                        jnp.asarray(scale * np.exp(x)), a)
     want = np.asarray(_problems.spectral_model_psd(scale * jnp.exp(x), a))

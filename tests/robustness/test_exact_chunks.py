@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _simconfig import DT, GAMMA
+from _simconfig import GAMMA, frames, rec
 from scipy.linalg import toeplitz
 
 import blurtrap as bt
@@ -24,16 +24,6 @@ from blurtrap.inference._fixed import reduced_objective
 from blurtrap.inference._models import get_model
 from blurtrap.inference._newton import fd_hessian_pass
 from blurtrap.inference._problems import exact_nll, make_exact_args, make_layout
-
-
-def frames(n, seed, k=2e-5):
-    x = bt.simulate(k, GAMMA, DT, DT, n, key=jax.random.key(seed), method="exact_frames",
-                    tracking_std=2e-9)
-    return np.asarray(x, dtype=np.float64).ravel()
-
-
-def rec(y):
-    return bt.Recording(y, frame_interval=DT, exposure=DT)
 
 
 def _args(lengths, mean, k_mode="shared", offset=3e-7):

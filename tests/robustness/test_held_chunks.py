@@ -4,31 +4,19 @@ ordinate chunks: checked against JAX autodiff of the plain reduced function (wri
 not the package's), and by counting compilations at a new record length.
 """
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _simconfig import DT, GAMMA
+from _simconfig import GAMMA, assert_chunk_sums_are_the_whole, frames, rec
 
 import blurtrap as bt
 from blurtrap.inference import _chunked
 from blurtrap.inference._fixed import reduce as reduce_fixed
 from blurtrap.inference._fixed import reduced_objective
 from blurtrap.inference._models import get_model
-from blurtrap.inference._newton import SafeguardedNewton, autodiff_pass
 from blurtrap.inference._problems import make_layout, spectral_nll
 from blurtrap.inference._spectral import _spectral_args
-
-
-def frames(n, seed, k=2e-5):
-    x = bt.simulate(k, GAMMA, DT, DT, n, key=jax.random.key(seed), method="exact_frames",
-                    tracking_std=2e-9)
-    return np.asarray(x, dtype=np.float64).ravel()
-
-
-def rec(y):
-    return bt.Recording(y, frame_interval=DT, exposure=DT)
 
 
 def _plain_reduced(q, a):
@@ -56,13 +44,7 @@ def test_reduced_pass_equals_autodiff_of_the_reduced_function(model, fixed):
     chunks = _chunked.ordinate_chunks(fargs)
     assert len(chunks) == 2
     x = jnp.asarray([0.03, -0.02, 0.2][:fscale.shape[0]])
-    acc = _chunked._start(SafeguardedNewton(rtol=1e-9, atol=1e-9), x)[1]
-    for c in chunks:
-        acc = _chunked._chunk_pass(red, x, fscale, c, acc)
-    ref = eqx.filter_jit(autodiff_pass(_plain_reduced))(x, fscale, fargs)
-    for got, want in zip(acc, ref):
-        got, want = np.asarray(got), np.asarray(want)
-        assert np.max(np.abs(got - want)) < 1e-11 * np.max(np.abs(want)), (got, want)
+    assert_chunk_sums_are_the_whole(red, _plain_reduced, chunks, x, fscale, fargs)
 
 
 def test_held_fit_at_a_new_length_compiles_no_fit_program(compiles):
