@@ -36,6 +36,24 @@ print("RESULT " + json.dumps(out))
 """
 
 
+#: the head of a child that counts XLA compilations (``count = [number, seconds]``,
+#: ``jax.monitoring``) and reads ``n0, n1`` from its JSON argument (bench_held.py,
+#: bench_diagnose_buckets.py)
+COUNTED_HEAD = r"""
+import json, sys, time
+import numpy as np, jax
+import blurtrap as bt
+bt.enable_x64()
+n0, n1 = json.loads(sys.argv[1])
+count = [0, 0.0]
+def _listen(event, duration, **kw):
+    if event == "/jax/core/compile/backend_compile_duration":
+        count[0] += 1
+        count[1] += duration
+jax.monitoring.register_event_duration_secs_listener(_listen)
+"""
+
+
 def child_script(call: str, record: str) -> str:
     """The child's source for one statement `call` (setting ``res``) and the dict
     expression `record` of the fields kept per call."""

@@ -23,23 +23,12 @@ import json
 import os
 import pathlib
 import platform
-import subprocess
-import sys
+
+from _child import COUNTED_HEAD, run_source
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-_CHILD = r"""
-import json, sys, time
-import numpy as np, jax
-import blurtrap as bt
-bt.enable_x64()
-n0, n1 = json.loads(sys.argv[1])
-count = [0, 0.0]
-def _listen(event, duration, **kw):
-    if event == "/jax/core/compile/backend_compile_duration":
-        count[0] += 1
-        count[1] += duration
-jax.monitoring.register_event_duration_secs_listener(_listen)
+_CHILD = COUNTED_HEAD + r"""
 y = np.asarray(bt.simulate(5e-5, 6 * np.pi * 0.00093 * 1.53e-6, 1e-8, 1e-5, max(n0, n1),
                            key=jax.random.key(20), method="exact_frames",
                            tracking_std=2e-9))[0]
@@ -54,17 +43,6 @@ rank = [[c.effect, None if c.delta_loglik is None else round(float(c.delta_logli
         for c in res.ranking]
 print("RESULT " + json.dumps({"rows": rows, "ranking": rank, "adequate": bool(res.adequate)}))
 """
-
-
-def run_tree(tree: pathlib.Path, n0: int, n1: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree), JAX_ENABLE_X64="1")
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    proc = subprocess.run([sys.executable, "-c", _CHILD, json.dumps([n0, n1])], env=env,
-                          capture_output=True, text=True, cwd=tree)
-    line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")]
-    if not line:
-        return {"error": proc.stderr[-3000:]}
-    return json.loads(line[0][7:])
 
 
 def main():
@@ -82,7 +60,7 @@ def main():
     print("|---|---|---|---|---|---|")
     rankings = {}
     for label, tree in trees:
-        out = run_tree(tree, n0, n1)
+        out = run_source(tree, _CHILD, (json.dumps([n0, n1]),))
         if "error" in out:
             print(f"| {label} | error: {out['error'][-300:]!r} |")
             continue

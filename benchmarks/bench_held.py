@@ -22,22 +22,11 @@ import os
 import pathlib
 import platform
 
-from _child import run_source
+from _child import COUNTED_HEAD, run_source
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-_CHILD = r"""
-import json, sys, time
-import numpy as np, jax
-import blurtrap as bt
-bt.enable_x64()
-n0, n1 = json.loads(sys.argv[1])
-count = [0, 0.0]
-def _listen(event, duration, **kw):
-    if event == "/jax/core/compile/backend_compile_duration":
-        count[0] += 1
-        count[1] += duration
-jax.monitoring.register_event_duration_secs_listener(_listen)
+_CHILD = COUNTED_HEAD + r"""
 r = 1.53e-6
 gamma = 6 * np.pi * 0.00093 * r
 dt = 1 / 1500
