@@ -85,9 +85,12 @@ def args_chunkable(args) -> bool:
     can be evaluated from a chunk of them: the closed-form core model (fused pass), any
     model whose spectrum at an ordinate depends on that frequency alone (closed forms with
     additive or relation effects: drift, line noise, heating ...; unaliased models; the
-    exact fold), and a model folded on nodes (:mod:`._nodes`) where the whole record uses
-    nodes too (each chunk then carries the record's frequency span, :func:`_spans_nodes`).
-    Decided from static fields and shapes only."""
+    exact fold), and a model folded on nodes (:mod:`._nodes`): each chunk then carries the
+    record's frequency span (:func:`_spans_nodes`), and a record too short to use nodes on
+    its own (``_nodes.MIN_ORDINATES``) uses them in its chunk, so that its fit shares the
+    long records' chunk program instead of compiling one per padded length (the two agree
+    to the nodes' accuracy, ~1e-7 of the spectrum). Decided from static fields and shapes
+    only."""
     if CHUNK is None or not isinstance(args, SpectralArgs):
         return False
     if _fused_pass_applies(args):
@@ -95,8 +98,15 @@ def args_chunkable(args) -> bool:
     m = args.model
     if m.closed_form or not m.alias:
         return True
-    # folded: on nodes (whole record and chunks alike) or by the exact sum at each ordinate
-    return use_nodes(args.f, m.fold_nodes) == use_nodes(np.empty((1, CHUNK)), m.fold_nodes)
+    # folded: on nodes spanning the record in every chunk (a short record too: its one chunk
+    # then holds the nodes, so records of any length share the chunk program), or by the
+    # exact sum at each ordinate where a chunk would not use nodes either
+    return _chunk_uses_nodes(m) or not use_nodes(args.f, m.fold_nodes)
+
+
+def _chunk_uses_nodes(model) -> bool:
+    """A chunk of :data:`CHUNK` ordinates folds ``model``'s spectrum on nodes."""
+    return CHUNK is not None and use_nodes(np.empty((1, CHUNK)), model.fold_nodes)
 
 
 def _spans_nodes(args: SpectralArgs) -> bool:
@@ -105,7 +115,7 @@ def _spans_nodes(args: SpectralArgs) -> bool:
     |f|, so that its nodes are the whole record's (and so is every interpolated value)."""
     m = args.model
     return (not _fused_pass_applies(args) and m.alias and not m.closed_form
-            and use_nodes(args.f, m.fold_nodes))
+            and _chunk_uses_nodes(m))
 
 
 def _with_ordinates(args: SpectralArgs, f, s2, power, weight) -> SpectralArgs:

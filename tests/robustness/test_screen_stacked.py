@@ -15,7 +15,7 @@ from _simconfig import GAMMA
 import blurtrap as bt
 from blurtrap.inference import _chunked, _screen_stacked
 from blurtrap.inference._models import get_model
-from blurtrap.inference._nodes import NodeValues, node_plan
+from blurtrap.inference._nodes import NodeValues, node_plan, use_nodes
 from blurtrap.inference._problems import (
     _spectral_nll,
     make_layout,
@@ -112,8 +112,20 @@ def test_given_node_values_equal_the_models_own_fold(hydro_args):
 
 
 def test_no_stack_where_nothing_is_folded_on_nodes():
-    """Closed-form models (the fused pass or autodiff) and records too short for nodes are
-    not stacked."""
+    """Closed-form models (the fused pass or autodiff) are not stacked."""
     assert not _screen_stacked.applies(spectral_nll, _args("standard+drift", (40_000,)))
-    assert not _screen_stacked.applies(spectral_nll,
-                                       _args("standard+hydrodynamics", (4_000,)))
+
+
+def test_a_record_too_short_for_nodes_is_stacked_on_its_span():
+    """A record too short to fold on nodes by itself (2000 ordinates) is stacked in one
+    chunk whose nodes span it: the stacked value equals autodiff of the whole objective
+    (exact fold) to the nodes' accuracy (1e-9 of the value), and its chunk sums to 1e-12."""
+    a = _args("standard+hydrodynamics", (4_000,))
+    assert not use_nodes(a.f, a.model.fold_nodes) and _screen_stacked.applies(spectral_nll, a)
+    s = _screen_stacked.stack(a)
+    assert int(s.n) == 1
+    p = _p(a)
+    got = float(jax.jit(_screen_stacked.stacked_nll)(p, s))
+    assert got == pytest.approx(float(jax.jit(_spectral_nll)(p, a)), rel=1e-9)
+    chunks = sum(float(_spectral_nll(p, c)) for c in _chunked.ordinate_chunks(a))
+    assert got == pytest.approx(chunks, rel=1e-12)
