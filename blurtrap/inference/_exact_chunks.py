@@ -186,7 +186,7 @@ def _chunk_jvp(theta, carry, dcarry, chunk, mean: str):
 
 
 def _held_p(x, scale, held):
-    p = scale * jnp.exp(x)
+    p = x if scale is None else scale * jnp.exp(x)  # scale None: x is the parameters
     if held is not None:
         full, free = held
         p = full.at[jnp.asarray(free)].set(p)
@@ -340,7 +340,8 @@ def exact_chunk_pass(nll, args, h):
 def exact_chunk_grads(nll, args):
     """``(xs, scale) -> (values (P,), gradients (P, n))`` of ``nll(scale exp(x))`` at the
     points ``xs`` (P, n) in frame chunks (the same programs for every record length), or None
-    where the chunked pass does not apply (as :func:`exact_chunk_pass`)."""
+    where the chunked pass does not apply (as :func:`exact_chunk_pass`). ``scale=None``:
+    of ``nll(x)``, the gradients in the parameters themselves (any of them may be 0)."""
     ch = _frame_chunks_of(nll, args)
     if ch is None:
         return None

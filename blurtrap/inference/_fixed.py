@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _chunked
+from ._exact_chunks import exact_chunk_grads
 from ._fit import FitOutput
 from ._newton import FixedArgs, ReducedObjective
 
@@ -121,14 +122,19 @@ def _grads(nll, pts, args) -> np.ndarray:
     gradient (1) and Whittle information (2 n + 1) share one compiled gradient per objective
     and shape (a hydrodynamic model's took ~4 s to compile; a few more evaluations cost
     milliseconds). The Whittle objective's gradient is summed over its ordinate chunks
-    (:mod:`._chunked`), so a record of a new length compiles nothing here."""
+    (:mod:`._chunked`), the exact likelihood's carried through its frame chunks
+    (:mod:`._exact_chunks`), so a record of a new length compiles nothing here (the exact
+    one compiled ~2 s per padded length before)."""
     pts = np.asarray(pts, dtype=float)
     size = 1 << (max(len(pts), 2 * pts.shape[1] + 1) - 1).bit_length()
     padded = jnp.asarray(np.concatenate([pts, np.repeat(pts[:1], size - len(pts), axis=0)]))
     fn = _grad_fn(nll)
+    framed = exact_chunk_grads(nll, args)
     if _chunked.objective_chunkable(nll, args):  # a sum over ordinates: a new length
         out = np.sum([np.asarray(fn(padded, c), dtype=float)  # compiles nothing
                       for c in _chunked.ordinate_chunks(args)], axis=0)
+    elif framed is not None:  # the exact likelihood carried through its frame chunks
+        out = np.asarray(framed(padded, None)[1], dtype=float)
     else:
         out = np.asarray(fn(padded, args), dtype=float)
     return out[:len(pts)]

@@ -83,3 +83,57 @@ def test_held_error_gradients_summed_over_chunks_equal_the_whole():
     want = np.asarray(jax.vmap(jax.grad(_spectral_nll), in_axes=(0, None))(jnp.asarray(pts), a))
     assert got.shape == want.shape == (3, 4)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.max(np.abs(want)))
+
+
+def test_held_error_gradients_of_the_exact_likelihood_in_frame_chunks():
+    """The same gradients of the exact likelihood, carried through its frame chunks (a
+    record of a new length compiles nothing), equal JAX's gradient of ``exact_nll`` on the
+    whole record (1e-9), two recordings of different lengths, one point with eps^2 at its
+    bound 0 (the natural parameters, no logarithm)."""
+    from blurtrap.inference._exact_chunks import exact_chunk_grads
+    from blurtrap.inference._fixed import _grads
+    from blurtrap.inference._problems import exact_nll, make_exact_args
+
+    recs = [rec(frames(5000, 5)), rec(frames(9000, 6))]
+    m = get_model("standard")
+    a = make_exact_args(recs, make_layout(recs, "per_recording", True, ()), m)
+    assert exact_chunk_grads(exact_nll, a) is not None
+    p0 = np.array([2.1e-5, 1.9e-5, 1.05 * GAMMA, 5e-18])
+    pts = np.stack([p0, p0 * 1.01, p0 * np.array([0.98, 1.0, 1.0, 0.0])])
+    got = _grads(exact_nll, pts, a)
+    want = np.asarray(jax.vmap(jax.grad(exact_nll), in_axes=(0, None))(jnp.asarray(pts), a))
+    assert got.shape == want.shape == (3, 4)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
+
+
+def test_held_exact_fit_at_a_new_length_compiles_nothing_for_held_errors(compiles):
+    """A held gamma with an error on records short enough for the exact likelihood: a new
+    length compiles no exact-likelihood program for the propagated errors (before: the
+    gradient batch of ``exact_nll`` per padded length, ~2 s)."""
+    y = frames(9_200, 53)
+    fixed = {"gamma": (GAMMA, 0.03 * GAMMA)}
+    bt.calibrate(rec(y[:4096]), likelihood="exact", fixed=fixed)
+    compiles.reset()
+    res = bt.calibrate(rec(y[4096:]), likelihood="exact", fixed=fixed)
+    assert res.converged and abs(res.k / 2e-5 - 1) < 3 * res.k_err / 2e-5
+    assert [n for n in compiles.names if "exact_nll" in n or "_chunk_jvp" in n] == [], \
+        compiles.names
+
+
+def test_short_stokes_fit_at_a_new_length_compiles_no_fit_program(compiles):
+    """``friction="stokes"`` with a bead whose hydrodynamics are added (a spectrum folded on
+    nodes): after one record of 3000 frames (1500 ordinates, too few for nodes by
+    themselves), one of 5000 frames (a new bucket, on nodes) compiles none of the fit's
+    programs (before: one compiled Newton loop per bucket below 4096 ordinates and a chunk
+    program above, 13.8 s); k agrees with the truth."""
+    y = frames(8_000, 52, k=5e-5)
+    meta = {"bead_radius_m": 1.53e-6, "viscosity_Pa_s": 0.00093}
+    fit_programs = ("_chunk_pass", "_update", "_start", "_finish", "_coarse", "_newton",
+                    "_bfgs", "SpectralObjective")
+    first = bt.calibrate(rec(y[:3000], metadata=meta), friction="stokes")
+    assert "hydrodynamics" in first.model
+    compiles.reset()
+    res = bt.calibrate(rec(y[3000:], metadata=meta), friction="stokes")
+    assert res.converged and abs(res.k / 5e-5 - 1) < 3 * res.k_err / 5e-5
+    assert [n for n in compiles.names if any(p in n for p in fit_programs)] == [], \
+        compiles.names
