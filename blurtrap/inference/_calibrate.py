@@ -22,7 +22,7 @@ from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_in
 from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
 from ._problems import make_layout
-from ._recordings import _bead_radii, _plausibility_notes, _stokes_notes, as_recordings, misfit_note
+from ._recordings import _bead_radii, as_recordings, misfit_note, physics_notes
 from ._refusals import _check_psd_blocks, _no_temporal_information_message, known_friction_message
 from ._result import CalibrationResult, FitError
 from ._starts import moment_start
@@ -145,9 +145,7 @@ def calibrate(
                      _flag("robust", robust))
     res = finish_instrument(res, plan).with_inputs(plan.recordings, plan.model,
                                                    plan.f_range, plan.excluded)
-    if not plan.volts:
-        data_notes += tuple(_stokes_notes(recs, radii, res))
-        data_notes += tuple(_plausibility_notes(recs, res))
+    data_notes += tuple(physics_notes(recs, radii, res, plan))
     notes = tuple(plan.notes) + data_notes
     notes += tuple(misfit_note(res, tuple(res.notes) + notes))
     if notes:

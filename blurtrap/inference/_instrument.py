@@ -262,7 +262,7 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
                      f"(R = {sts[0]['bead_radius_m'] * 1e6:.4g} um"
                      + (f", Faxen factor at {h * 1e6:.4g} um from the surface" if h else "")
                      + (f"; +- {se / g * 100:.2g} % propagated" if se > 0 else "")
-                     + ("" if volts else "), held in the fit"))
+                     + (")" if volts else "), held in the fit"))
     if volts and "gamma" in held:
         gamma_known = held.pop("gamma")
     rng = f_range

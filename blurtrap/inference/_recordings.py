@@ -124,12 +124,44 @@ def _stokes_notes(recs, radii, res) -> list:
 _UNIT_METRES = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
 
 
-def _plausibility_notes(recs, res) -> list:
+def physics_notes(recs, radii, res, plan) -> list:
+    """The notes that hold a fitted k and gamma (in SI) against physics: a gamma far from
+    Stokes where the bead is known, and k or gamma outside any trapped bead's range. For
+    positions in metres and for positions in volts with a stage drive (Rd from the drive:
+    a stage in another unit than declared scales k and gamma by 1/s^2, an independent pass
+    found k = 112 N/m and gamma 1e6 x Stokes with no note); not for volts through a known
+    friction (gamma is the friction given). A friction given beside a drive is not used:
+    the note says so and compares it with the fitted gamma."""
+    if plan.volts and plan.drive is None:
+        return []
+    if plan.volts and plan.gamma_known is not None:
+        out = [_drive_friction_note(res, plan.gamma_known)]
+    else:
+        out = _stokes_notes(recs, radii, res)
+    return out + _plausibility_notes(recs, res, stage=plan.volts)
+
+
+def _drive_friction_note(res, gamma_known) -> str:
+    g0, s0 = gamma_known
+    g, sg = float(res.gamma), float(res.gamma_err)
+    z = (g - g0) / math.sqrt(sg ** 2 + s0 ** 2) if math.isfinite(sg) and sg + s0 > 0 else math.nan
+    verdict = (f"they disagree (z = {z:.2g}): check the bead radius, its distance to the "
+               "surface, the viscosity and the stage's calibration and unit"
+               if abs(z) > 3 else f"consistent (z = {z:.2g})")
+    return (f"the friction given ({g0 * 1e6:.5g} pN s/um, friction='stokes' or fixed gamma) is "
+            "not used: with a stage drive the displacement sensitivity comes from the drive "
+            f"and gamma is fitted, {g * 1e6:.5g} +- {sg * 1e6:.2g} pN s/um, {g / g0:.3g} x the "
+            f"friction given: {verdict}. Without the drive (no stage column) the friction "
+            "given would set Rd")
+
+
+def _plausibility_notes(recs, res, stage=False) -> list:
     """A note when a fitted stiffness or friction lies outside its physically plausible
     range (``Param.bounds``, the support of the default priors): almost always positions in
     another unit than declared. k and gamma scale as 1/s^2 when the positions are s x too
-    large, so the note names the unit that brings them into range (positions in metres;
-    not for volts)."""
+    large, so the note names the unit that brings them into range (positions in metres);
+    ``stage``: positions in volts scaled by a stage drive (Rd), whose stage positions (in
+    metres) then carry the slip: the note names the factor."""
     from ..effects import QUANTITIES
 
     bad = []
@@ -144,9 +176,19 @@ def _plausibility_notes(recs, res) -> list:
     shown = "; ".join(f"{n} = {v:.3g} {q.unit} ({v * q.lab_factor:.3g} {q.lab_unit}), "
                       f"expected {q.bounds[0]:g}..{q.bounds[1]:g} {q.unit}" for n, v, q in bad)
     meta = getattr(recs[0], "metadata", None) or {}
-    declared = str(meta.get("position_unit", "m")) if hasattr(meta, "get") else "m"
+    declared = "m" if stage else (str(meta.get("position_unit", "m")) if hasattr(meta, "get")
+                                  else "m")
     hint = ""
-    if declared in _UNIT_METRES:
+    if stage:
+        fits = [s for s in (1e-9, 1e-6, 1e-3, 1e3, 1e6, 1e9)
+                if all(q.bounds[0] <= v / s ** 2 <= q.bounds[1] for _, v, q in bad)]
+        if fits:
+            hint = (f"; with the stage positions {fits[0]:g} x what was given they would be "
+                    "in range: check the stage's unit (Recording(stage=...) is in metres; "
+                    "a stage_nm / stage_um column, um read as nm or the reverse)")
+        else:
+            hint = ": check the stage's unit and the drive amplitude"
+    elif declared in _UNIT_METRES:
         best = None
         for unit, metres in _UNIT_METRES.items():
             s = metres / _UNIT_METRES[declared]  # positions were s x what was declared

@@ -199,3 +199,48 @@ def test_a_trace_in_metres_gets_the_same_phase_check():
     assert any("position scale" in n and "SE from 1)" in n for n in right.notes)
     (note,) = phase_notes(fit(-1.0))
     assert "inverted" in note
+
+
+def _driven(seed, stage_scale=1.0, **meta):
+    stage, s = drive(150e-9)
+    rec = bt.Recording((thermal(seed) + np.real(H * s)) / RD, frame_interval=DT,
+                       exposure=1e-9 * DT, temperature=295.0, stage=stage_scale * stage,
+                       position_unit="V", metadata={"detector": "photodiode",
+                                                    "drive": {"frequency_Hz": FD}, **meta})
+    return bt.calibrate(rec)
+
+
+@pytest.mark.parametrize("scale, factor", [(1e-3, "1000"), (250.0, None)],
+                         ids=["stage in um read as nm", "stage 250 x too large"])
+def test_a_stage_in_another_unit_is_named(scale, factor):
+    # a fifth independent pass: k = 112 N/m and gamma 1e6 x Stokes (um read as nm) with no
+    # note: the plausibility and Stokes checks did not run on positions in volts. A stage
+    # 250 x too large gives k and gamma 250^2 x too small, still in a trapped bead's range:
+    # the known bead's Stokes friction names it
+    res = _driven(60, scale, bead_radius_m=1.53e-6, viscosity_Pa_s=9.5e-4)
+    assert any("x the Stokes friction" in n for n in res.notes)
+    implausible = [n for n in res.notes if n.startswith("implausible")]
+    if factor is None:
+        assert not implausible
+    else:
+        assert f"stage positions {factor} x what was given" in implausible[0]
+
+
+def test_a_correct_drive_gets_no_unit_or_stokes_note():
+    for seed in (61, 62):
+        res = _driven(seed, bead_radius_m=1.53e-6, viscosity_Pa_s=9.5e-4)
+        assert not [n for n in res.notes if n.startswith("implausible") or "Stokes friction"
+                    in n], res.notes
+
+
+def test_a_friction_given_beside_a_drive_is_named_as_not_used():
+    # friction='stokes' with a drive was silently ignored (gamma fitted, the result equal to
+    # friction='free'); the note was cut off mid-sentence
+    meta = {"bead_radius_m": 1.53e-6, "viscosity_Pa_s": 9.5e-4, "friction": "stokes"}
+    res = _driven(63, **meta)
+    (note,) = [n for n in res.notes if "is not used" in n]
+    assert "consistent (z = " in note
+    assert any(n.startswith("friction: Stokes") and n.endswith(")") for n in res.notes)
+    wrong = _driven(63, **{**meta, "bead_radius_m": 3 * 1.53e-6})  # a diameter as radius
+    (note,) = [n for n in wrong.notes if "is not used" in n]
+    assert "they disagree" in note
