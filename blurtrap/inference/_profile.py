@@ -50,6 +50,12 @@ DROP = 0.5 * Z95 * Z95
 WALD_TOL = 0.05
 #: x = log(p / scale) standing for p = 0 (p = 1e-30 scale: the likelihood is flat there)
 _LOG_ZERO = -69.0
+#: the lower side's last trial, "p = 0", is evaluated at this fraction of the estimate: a
+#: model degenerates at k or gamma = 0 itself (tau = gamma / k of 1e30 frames: rho rounds to
+#: 1), while a drop still below 1.92 there puts the end at 0 all the same (the profile of k
+#: on a record ~10 relaxation times long is flat towards free diffusion: its lower end was
+#: "not converged" in 81 of 98 fits)
+_ZERO_FRACTION = 1e-6
 #: root-find tolerance on the signed root (|drop - 1.92| < ~4e-4) and iteration caps
 _ROOT_TOL = 2e-4
 _ROOT_STEPS = 24
@@ -140,7 +146,7 @@ def _end_point(held, scale, args, x_hat, at_bound, i_mask, side, d1, slope, x_li
          v_min, th_i, d_max) = st
         first = it == 0
         # the trial: the held profile fit at th_i + side d (the minimum on the first pass)
-        psi = th_i + side * d
+        psi = jnp.maximum(th_i + side * d, _ZERO_FRACTION * th_i)
         t = jnp.where(first, 0.0, jnp.maximum(jnp.log(jnp.maximum(psi, 0.0) / sc_i), _LOG_ZERO))
         p0 = scale * jnp.exp(x) + side * (d - d_prev) * slope
         moved = jnp.where(p0 > 0.5 * scale * jnp.exp(x), jnp.log(jnp.maximum(p0, 1e-300) / scale),
@@ -249,7 +255,8 @@ def _wald_path_roots(nll, args, value, cov):
 
 
 def _consts():
-    return {"z95": Z95, "drop": DROP, "log_zero": _LOG_ZERO, "root_tol": _ROOT_TOL,
+    return {"z95": Z95, "drop": DROP, "log_zero": _LOG_ZERO, "zero_fraction": _ZERO_FRACTION,
+            "root_tol": _ROOT_TOL,
             "root_steps": _ROOT_STEPS, "newton_steps": _NEWTON_STEPS, "tol": 1e-9,
             "flat_atol": _FLAT_ATOL}
 

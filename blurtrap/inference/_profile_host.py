@@ -117,7 +117,7 @@ def _root_find(fits, scale, x_first, v_min, th_i, i, side, d1, slope, x_lift, c)
     d_a, g_a, d_b, g_b, have_b = 0.0, -z95, 0.0, 0.0, False
     d, d_prev, last, x, ok = min(d1, d_max), 0.0, -1, x_first, True
     for _ in range(c["root_steps"]):
-        psi = th_i + side * d
+        psi = max(th_i + side * d, c["zero_fraction"] * th_i)  # "0": see _ZERO_FRACTION
         t = max(math.log(psi / scale[i]), c["log_zero"]) if psi > 0 else c["log_zero"]
         p_now = scale * np.exp(x)
         p0 = p_now + side * (d - d_prev) * slope
