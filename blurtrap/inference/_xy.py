@@ -20,7 +20,9 @@ in the principal frame the sample cross-covariance ``c12`` has mean 0 and varian
 ``phi_hat - phi = c12 / (v1 - v2)`` to first order. The error of phi enters the projected
 traces' variances only at second order (``O(1/N)`` bias against ``O(1/sqrt N)`` errors), and
 ``c12`` is uncorrelated with the variances, so phi is treated as independent of (k1, k2,
-gamma); benchmarks/study_xy.py checks the coverage that results.
+gamma); benchmarks/study_xy.py checks the coverage that results. The model is in metres, so
+positions in volts enter every statistic times the joint fit's displacement sensitivity Rd
+(one for both axes: :mod:`._xy_checks`).
 """
 
 from __future__ import annotations
@@ -32,9 +34,12 @@ from typing import Any, cast
 import numpy as np
 
 from ..data import XYRecording
-from ..physics import frame_autocovariance, psd_measured
+from ..physics import psd_measured
 from ._calibrate import calibrate
 from ._result import LAB, CalibrationResult, FitError
+from ._xy_checks import COUPLING_Z as COUPLING_Z
+from ._xy_checks import _angle_stats as _angle_stats
+from ._xy_checks import _coupling_note, metres_per_unit, xy_pooling_notes
 
 #: principal axes count as resolved when the eigenvalue gap exceeds this many of its
 #: standard errors (under isotropy the gap is Rayleigh: false "resolved" rate exp(-z^2/2))
@@ -53,6 +58,9 @@ class XYCalibration:
       along x (y held fixed); ``k_xy = K_xy`` couples the axes and vanishes when phi = 0.
       Note ``kT / <x^2>`` (equipartition along x) is ``1 / (K^-1)_xx``, not ``K_xx``.
     - `gamma` [N s/m] and `tracking_var` [m^2]: shared by both axes (joint fit).
+    - `frame_covariance` [m^2]: sample covariance of the (x, y) frames (positions in volts:
+      times Rd^2, the joint fit's displacement sensitivity); `anisotropy_z` compares its
+      eigenvalue gap with the model's standard error, in metres too.
     - `expected_gamma_se`: expected (Fisher) SE of gamma [N s/m] from (the joint fit, axis 1
       alone, axis 2 alone) at the fitted values; ``gamma_precision_gain`` is their ratio.
     - `joint`: the joint :class:`CalibrationResult` of the two projected traces;
@@ -195,72 +203,6 @@ def _principal(pos: np.ndarray):
     return phi, mid + half, mid - half, cov
 
 
-def _autocov(k, gamma, eps2, xy: XYRecording):
-    """``(C(0), C(1), rho)`` of the frames along an axis with stiffness `k`."""
-    args = (k, gamma, xy.exposure, xy.frame_interval, xy.temperature, max(eps2, 0.0))
-    c0 = float(frame_autocovariance(0, *args))
-    c1 = float(frame_autocovariance(1, *args))
-    return c0, c1, math.exp(-xy.frame_interval * k / gamma)
-
-
-def _cross_sums(k1, k2, gamma, eps2, xy: XYRecording) -> tuple[float, float]:
-    """``(S0, S1) = (sum_n C1(n) C2(n), sum_n C1(n) C2(n+1))`` of the two axes' frame
-    autocovariances (``C(n) = c1 r^(|n|-1)`` for ``n != 0``): N times the variance of a
-    sample cross-covariance and the covariance of neighbouring lags' (Bartlett)."""
-    a0, a1, ra = _autocov(k1, gamma, eps2, xy)
-    b0, b1, rb = _autocov(k2, gamma, eps2, xy)
-    return (a0 * b0 + 2.0 * a1 * b1 / (1.0 - ra * rb),
-            a0 * b1 + a1 * b0 + a1 * b1 * (ra + rb) / (1.0 - ra * rb))
-
-
-def _angle_stats(k1, k2, gamma, eps2, xy: XYRecording, l1, l2):
-    """``(phi_err, anisotropy_z)`` from the exact frame autocovariances (module docstring)."""
-    n = xy.n_frames
-    a0, a1, ra = _autocov(k1, gamma, eps2, xy)
-    b0, b1, rb = _autocov(k2, gamma, eps2, xy)
-    cross = _cross_sums(k1, k2, gamma, eps2, xy)[0]
-    sq = a0**2 + 2.0 * a1**2 / (1.0 - ra**2) + b0**2 + 2.0 * b1**2 / (1.0 - rb**2)
-    gap_model = abs(a0 - b0)
-    phi_err = math.sqrt(cross / n) / gap_model if gap_model > 0 else math.inf
-    z = (l1 - l2) / math.sqrt(2.0 * sq / n)
-    return phi_err, z
-
-
-#: the principal-axis motions count as coupled when a lag-1 cross-covariance exceeds this
-#: many standard errors (two lags tested: a false note in ~1e-5 of fits)
-COUPLING_Z = 4.5
-
-
-def _coupling_note(u, v, k1, k2, gamma, eps2, xy: XYRecording) -> str | None:
-    """A note when the traces along the principal axes are correlated at lag +-1: in the
-    model the two axes are independent OU sequences (one isotropic friction), so their
-    sample cross-covariances ``c(h)`` have mean 0 and covariances (Bartlett) ``cov(c(h),
-    c(h')) = (1/N) sum_n C1(n) C2(n + h' - h)``: ``S0 = sum C1(n) C2(n)`` (as ``c12`` at lag
-    0, :func:`_angle_stats`) and ``S1 = sum C1(n) C2(n+1) = a0 b1 + a1 b0 + a1 b1 (ra + rb)
-    / (1 - ra rb)`` (``C(n) = c1 r^(|n|-1)`` for ``n != 0``). The principal axes make
-    ``c(0) = 0``, so ``c(+-1)`` is referred to its variance given that, ``(S0 - S1^2/S0)/N``.
-    Unequal detector sensitivities along x and y, cross-talk between the channels or an
-    anisotropic friction couple them."""
-    s0, s1 = _cross_sums(k1, k2, gamma, eps2, xy)
-    se = math.sqrt(max(s0 - s1 * s1 / s0, 0.0) / xy.n_frames) if s0 > 0 else 0.0
-    if not se > 0:
-        return None
-    x = np.asarray(u.positions, float) - float(np.mean(u.positions))
-    y = np.asarray(v.positions, float) - float(np.mean(v.positions))
-    z = [float(np.mean(x[1:] * y[:-1])) / se, float(np.mean(y[1:] * x[:-1])) / se]
-    if not max(abs(t) for t in z) > COUPLING_Z:
-        return None
-    return (f"the motions along the two principal axes are correlated at lag 1 ({z[0]:+.1f} and "
-            f"{z[1]:+.1f} standard errors), which a trap with one isotropic friction cannot "
-            "produce: unequal x and y detector sensitivities (a per-axis gain; the positions "
-            "must be in one length unit on both axes), unequal tracking noise on x and y "
-            "(it tilts the principal axes of the frames away from the trap's), cross-talk "
-            "between the channels, an anisotropic friction (a non-spherical particle) or a "
-            "drift common to both axes couple them, and k1, k2, gamma and phi are then "
-            "biased. Calibrate each axis's sensitivity separately, remove the drift, or fit x "
-            "and y alone (calibrate on each axis: its own eps^2)")
-
-
 def _whittle_information(k, gamma, eps2, xy: XYRecording, noise: bool) -> np.ndarray:
     """Expected (Whittle) Fisher information of one axis's frames for (k, gamma[, eps2]):
     ``sum_f d log P d log P^T`` over the positive Fourier frequencies of N frames; the
@@ -358,13 +300,17 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
     gamma = float(joint.gamma)
     noise = "tracking_var" in names
     eps2 = float(joint.tracking_var) if noise else 0.0
-    phi_err, z = _angle_stats(k1, k2, gamma, eps2, xy, l1, l2)
+    m = metres_per_unit(joint, xy)  # the data in metres, as the model (_xy_checks docstring)
+    phi_err, z = _angle_stats(k1, k2, gamma, eps2, xy, l1 * m * m, l2 * m * m)
     cov3 = np.zeros((3, 3))
     cov3[:2, :2] = cov_k
     cov3[2, 2] = phi_err**2 if math.isfinite(phi_err) else 0.0
     (kxx, kyy, kxy), (exx, eyy, exy) = _tensor(k1, k2, phi, cov3)
     notes = []
-    coupled = _coupling_note(u, v, k1, k2, gamma, eps2, xy) if "gamma" in names else None
+    coupled = None
+    if "gamma" in names:
+        coupled = _coupling_note(m * np.asarray(u.positions, float), m * np.asarray(v.positions, float),
+                                 k1, k2, gamma, eps2, xy)
     if coupled:
         notes.append(coupled)
     resolved = z > RESOLVE_Z
@@ -383,8 +329,8 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
         k1=k1, k1_err=float(math.sqrt(cov_k[0, 0])), k2=k2,
         k2_err=float(math.sqrt(cov_k[1, 1])), phi=phi, phi_err=phi_err, gamma=gamma,
         gamma_err=float(joint.gamma_err), tracking_var=eps2, k_x=kxx, k_x_err=exx,
-        k_y=kyy, k_y_err=eyy, k_xy=kxy, k_xy_err=exy, frame_covariance=cov,
+        k_y=kyy, k_y_err=eyy, k_xy=kxy, k_xy_err=exy, frame_covariance=cov * (m * m),
         anisotropy_z=float(z), resolved=bool(resolved), temperature=float(xy.temperature),
         n_frames=xy.n_frames, joint=joint, separate=seps,
         expected_gamma_se=cast(Any, expected),
-        notes=tuple(notes) + tuple(joint.notes))
+        notes=tuple(notes) + xy_pooling_notes(joint.notes, phi, seps, xy.position_unit == "V"))
