@@ -19,6 +19,7 @@ from ._csv_rows import TIME_COLUMN as TIME_COLUMN
 from ._csv_rows import _RowParser as _RowParser
 from ._csv_rows import _short
 from ._recording import DEFAULT_TIMING_TOLERANCE, Recording
+from ._timing import infer_frame_interval as infer_frame_interval
 from ._units import (
     ALLOWED_UNITS,
     canonical_unit,
@@ -233,17 +234,6 @@ def file_metadata(path, unit, temperature, metadata):
         temperature = DEFAULT_TEMPERATURE
         meta["defaults_applied"] = {"temperature_K": DEFAULT_TEMPERATURE}
     return meta, temperature
-
-
-def infer_frame_interval(times: np.ndarray, tol: float = DEFAULT_TIMING_TOLERANCE) -> float:
-    """Frame interval [s] from time stamps: the median step, refined to the least-squares
-    slope of ``t`` against frame index when the two agree to ``tol`` (regular stamps)."""
-    d = np.diff(times)
-    med = float(np.median(d))
-    i = np.arange(times.shape[0], dtype=np.float64)
-    ic = i - i.mean()
-    slope = float(np.dot(ic, times - times.mean()) / np.dot(ic, ic))
-    return slope if abs(slope - med) <= tol * med else med
 
 
 def load_csv(

@@ -61,6 +61,17 @@ def _row_times(times, n: int) -> list:
     )
 
 
+def _column_vector(raw, times):
+    """``(positions, times)`` with a column vector (N, 1) of positions (and of times) read as
+    1-D: as rows = recordings it would be N recordings of one frame, which no recording can
+    be; it is one recording's column, as a CSV's single position column is."""
+    if raw.ndim == 2 and raw.shape[1] == 1 and raw.shape[0] >= 2:
+        raw = raw[:, 0]
+        if times is not None and np.shape(times) == (raw.shape[0], 1):
+            times = np.asarray(times)[:, 0]
+    return raw, times
+
+
 def from_arrays(
     positions,
     *,
@@ -82,9 +93,10 @@ def from_arrays(
     **Arguments:**
 
     - `positions`: 1-D (one recording -> :class:`Recording`) or 2-D (rows are recordings ->
-      :class:`RecordingSet`), in `position_unit` (m, mm, um/µm, nm, or px with
-      `pixel_size_m` [m]); converted to float64 metres. ``"V"``: a detector signal in volts,
-      kept in volts (``Recording.position_unit == "V"``).
+      :class:`RecordingSet`; a column vector of shape (N, 1) is one recording, as 1-D), in
+      `position_unit` (m, mm, um/µm, nm, or px with `pixel_size_m` [m]); converted to
+      float64 metres. ``"V"``: a detector signal in volts, kept in volts
+      (``Recording.position_unit == "V"``).
     - `frame_interval`, `exposure` [s], `temperature` [K], `laser_power` [W] (NaN or None:
       unknown): scalars, or one value per row for 2-D input.
     - `times` [s]: None, 1-D (shared by all rows) or 2-D (one row per recording).
@@ -102,6 +114,7 @@ def from_arrays(
             f"positions must be 1-D (one recording) or 2-D (rows = recordings); got shape "
             f"{raw.shape}"
         )
+    raw, times = _column_vector(raw, times)
     meta = {} if metadata is None else dict(metadata)
     if raw.dtype != np.float64:
         meta.setdefault("input_dtype", raw.dtype.name)
@@ -148,7 +161,11 @@ def from_arrays(
                 )
             )
         except ValueError as e:
-            raise ValueError(f"recording {i} (row {i} of positions): {e}") from None
+            rows, cols = raw.shape
+            hint = (f" (positions has shape {raw.shape}: rows are recordings, so this is {rows} "
+                    f"recordings of {cols} frames each; if the recordings are in columns, pass "
+                    "positions.T)" if rows > cols else "")
+            raise ValueError(f"recording {i} (row {i} of positions): {e}{hint}") from None
     return RecordingSet(recs)
 
 

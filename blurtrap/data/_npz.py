@@ -78,7 +78,8 @@ def load_npz(
     """Load what :func:`save_npz` wrote (a Recording or a RecordingSet, as saved).
 
     A plain NPZ without a blurtrap header is accepted if it holds ``positions`` [m] (1-D, or
-    2-D with one recording per row) and optionally ``times`` [s]; ``frame_interval``,
+    2-D with one recording per row; a column vector of shape (N, 1) is one recording) and
+    optionally ``times`` [s]; ``frame_interval``,
     ``exposure``, ``temperature`` and ``laser_power`` are then taken from arrays of those
     names in the file, else from the keywords.
     """

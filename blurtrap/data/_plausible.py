@@ -104,15 +104,32 @@ def check_positions(positions, check_units: bool, declared_unit: str = "m") -> t
             "silently: fix or remove them (the CSV loaders offer on_bad_rows='exclude')"
         )
     if np.all(arr == arr[0]):
-        raise ValueError(
-            f"positions is constant (zero variance; every value = {float(arr[0])!r}): a trapped "
-            "bead always fluctuates, so this is not a position trace"
-        )
+        raise ValueError(_constant_message(float(arr[0]), declared_unit))
     if check_units and declared_unit == "V":
         _check_volts_scale(float(np.std(arr)))
     elif check_units:  # (unchecked: no overflow in np.std for |x| > 1e154)
         _check_position_scale(float(np.std(arr)), declared_unit)
     return arr, note
+
+
+def _constant_message(value: float, declared: str) -> str:
+    """Why a trace is one value: positions rounded to whole pixels (declared in px), or no
+    position trace at all (or one rounded coarser than the motion)."""
+    head = f"positions is constant (zero variance; every value = {value!r})"
+    if declared == "px":
+        return (
+            f"{head}: the positions in pixels (position_unit 'px') look quantised, rounded to "
+            "whole pixels, and a pixel (~100 nm in the sample) is larger than the bead's "
+            "motion (a trapped bead moves ~1-100 nm), so every frame rounds to the same pixel "
+            "and the trace holds no motion to calibrate. Export sub-pixel positions (the "
+            "tracker's fitted centres, not integer pixel indices)"
+        )
+    unit = _UNIT_WORDS.get(declared, declared)
+    return (
+        f"{head}: a trapped bead always fluctuates, so this is not a position trace (a column "
+        f"of zeros, a constant channel?), or one quantised: rounded to a resolution (e.g. whole "
+        f"{unit}) coarser than the bead's motion. Write the positions with more digits"
+    )
 
 
 def declared_unit(metadata) -> str:
