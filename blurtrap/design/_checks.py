@@ -4,9 +4,19 @@ value and what was expected)."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
+from ..data.internal import (
+    MAX_BEAD_RADIUS_M,
+    MAX_PLAUSIBLE_INTERVAL_S,
+    MAX_PLAUSIBLE_POSITION_STD_M,
+    check_temperature,
+    in_ms_message,
+    likely_position_unit,
+)
+from ..effects import QUANTITIES
 from ..physics import water_viscosity
 
 #: the design targets (the SE each minimises; see design's docstring)
@@ -50,20 +60,110 @@ def _checked_noise(tracking_std, photon_limited) -> float:
     return float(tracking_std) ** 2
 
 
-def checked_trap(k, gamma, radius, viscosity, temperature):
+def checked_trap(k, gamma, radius, viscosity, temperature, check_units: bool = True):
     """``(ks, gamma, temperature)``: the stiffnesses (a range ``(k_min, k_max)`` becomes three
     log-spaced values), the friction (given, or Stokes from the radius and viscosity, water
-    at the temperature by default) and the temperature, checked."""
-    ks = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
-    if len(ks) == 2:
-        ks = tuple(np.geomspace(ks[0], ks[1], 3))
-    for v in ks:
+    at the temperature by default) and the temperature, checked (with `check_units`, each
+    within its plausible range in SI: a value in lab units is named as such)."""
+    given = tuple(float(v) for v in np.atleast_1d(np.asarray(k, dtype=float)))
+    for v in given:
         _check("k", v, unit="N/m")
-    temperature = _check("temperature", temperature, unit="K")
+    if check_units:
+        _check_range("k", given)
+    ks = tuple(np.geomspace(given[0], given[1], 3)) if len(given) == 2 else given
+    temperature = check_temperature(temperature, check_units)
+    stokes = ""
     if gamma is None:
         if radius is None:
             raise ValueError("give gamma [N s/m] or the bead radius [m]")
+        radius = _check("radius", radius, unit="m")
+        if check_units:
+            _check_radius(radius)
         eta = viscosity if viscosity is not None else float(water_viscosity(temperature))
-        gamma = 6.0 * math.pi * _check("viscosity", eta, unit="Pa s") * _check(
-            "radius", radius, unit="m")
-    return ks, _check("gamma", gamma, unit="N s/m"), temperature
+        gamma = 6.0 * math.pi * _check("viscosity", eta, unit="Pa s") * radius
+        stokes = f" (the Stokes friction 6 pi eta r of radius = {radius:g} m, viscosity = {eta:g} Pa s)"
+    gamma = _check("gamma", gamma, unit="N s/m")
+    if check_units:
+        _check_range("gamma", (gamma,), stokes)
+    return ks, gamma, temperature
+
+
+#: lab units a stiffness or friction given in the wrong unit may be in, with their SI factor
+_LAB_UNITS = {"k": (("pN/um", 1e-6), ("pN/nm", 1e-3)),
+              "gamma": (("pN s/um", 1e-6), ("pN s/nm", 1e-3))}
+#: radii a bead in the wrong unit may have: it fits the optical tweezers' beads, 10 nm..100 um
+_RADIUS_UNITS = (("um", 1e-6), ("nm", 1e-9))
+_MIN_LISTED_RADIUS_M, _MAX_LISTED_RADIUS_M = 1e-8, 1e-4
+_ESCAPE = "; pass check_units=False if the value is right"
+
+
+def _check_range(name: str, values, given_as: str = "") -> None:
+    """Each of `values` within the plausible range of quantity `name` (``Param.bounds``, the
+    support of calibrate's default priors), else a ValueError naming the lab unit that fits."""
+    q = QUANTITIES[name]
+    lo, hi = q.bounds
+    for v in values:
+        if lo <= v <= hi:
+            continue
+        fits = [f"{v:g} {u} = {v * f:g} {q.unit}" for u, f in _LAB_UNITS[name] if lo <= v * f <= hi]
+        hint = (f"this looks like lab units ({' or '.join(fits)}), not {q.unit}" if fits
+                else "this looks like a unit slip")
+        raise ValueError(f"{name} = {v:g} {q.unit}{given_as} is outside the plausible range of the "
+                         f"{q.description}, {lo:g}..{hi:g} {q.unit}: {hint}. design takes SI "
+                         f"({q.unit}){_ESCAPE}")
+
+
+def _check_radius(radius: float) -> None:
+    """A bead radius [m] below the data layer's limit (1 mm), else a ValueError naming the
+    unit the number fits."""
+    if radius < MAX_BEAD_RADIUS_M:
+        return
+    fits = [f"{radius:g} {u} = {radius * f:g} m" for u, f in _RADIUS_UNITS
+            if _MIN_LISTED_RADIUS_M <= radius * f <= _MAX_LISTED_RADIUS_M]
+    hint = f"this looks like {' or '.join(fits)}" if fits else "this looks like um or nm"
+    raise ValueError(f"radius = {radius:g} m is not below {MAX_BEAD_RADIUS_M:g} m, larger than any "
+                     f"trapped bead: {hint}, not metres (a 1 um bead has radius = 5e-7 m: the "
+                     f"radius, not the diameter). design takes metres{_ESCAPE}")
+
+
+def check_units_of(tracking_std: float, max_fps: float, min_exposure: float,
+                   reference_exposure) -> None:
+    """The unit checks of design's acquisition settings: a tracking error above what any
+    trapped bead moves (nm given as metres), exposures of 0.1 s or more (ms given as s). A
+    frame rate below 10 frames/s is accepted (a slow camera on a soft trap), with a warning
+    that it may be kHz and that the loaders take such intervals for ms."""
+    if tracking_std > MAX_PLAUSIBLE_POSITION_STD_M:
+        unit = likely_position_unit(tracking_std, "m")
+        hint = f"{unit} ({tracking_std:g} {unit})" if unit else "nm or um"
+        raise ValueError(f"tracking_std = {tracking_std:g} m is above {MAX_PLAUSIBLE_POSITION_STD_M:g} m "
+                         "(10 um), more than a trapped bead moves (0.6 nm..0.2 um): the tracking "
+                         f"error (its rms) looks like {hint}, not metres. design takes metres"
+                         f"{_ESCAPE}")
+    for name, value in (("min_exposure", min_exposure), ("reference_exposure", reference_exposure)):
+        if value is not None and value >= MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(in_ms_message(name, float(value)))
+    if 1.0 / max_fps >= MAX_PLAUSIBLE_INTERVAL_S:  # stacklevel: design, its float64_scope, the caller
+        warnings.warn(f"max_fps = {max_fps:g} Hz is below {1 / MAX_PLAUSIBLE_INTERVAL_S:g} frames/s: "
+                      f"if the camera runs at {max_fps:g} kHz, pass max_fps={max_fps * 1e3:g} (Hz). "
+                      "If it is this slow, the data loaders take frame intervals of "
+                      f"{MAX_PLAUSIBLE_INTERVAL_S:g} s or more for ms unless given check_units=False "
+                      "(design(check_units=False) does not warn)", UserWarning, stacklevel=4)
+
+
+def checked_current(current, check_units: bool) -> list:
+    """The user's design ``[(frame interval, exposure, frames[, laser power]), ...]`` as
+    tuples of floats, checked."""
+    cur = [tuple(float(x) for x in r) for r in current]
+    for i, r in enumerate(cur):
+        if len(r) not in (3, 4) or not (0 < r[1] <= r[0]) or (len(r) == 4 and not r[3] > 0):
+            raise ValueError(f"current: each recording needs (frame interval, exposure, "
+                             f"frames[, laser power > 0]) with 0 < exposure <= frame "
+                             f"interval; got {r}")
+        if not r[2] >= 2:
+            raise ValueError(f"current[{i}]: frames = {r[2]:g}; a recording needs at least 2 "
+                             f"frames (frame interval, exposure, frames); got {r}")
+        if check_units and r[0] >= MAX_PLAUSIBLE_INTERVAL_S:
+            raise ValueError(f"current[{i}]: " + in_ms_message("frame_interval", r[0]))
+    if len({len(r) for r in cur}) > 1:
+        raise ValueError("current: give a laser power for every recording or for none")
+    return cur

@@ -26,7 +26,7 @@ from .._config import float64_scope
 from ..physics import BOLTZMANN
 from ._bounds import bound_probability, bounded_covariance
 from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
-from ._checks import _check, _checked_friction, _checked_noise, checked_trap
+from ._checks import _check, _checked_friction, _checked_noise, check_units_of, checked_current, checked_trap
 from ._fisher import K_PAD, _informations, candidate_informations, padded
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
@@ -256,7 +256,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
            tracking_std: float = 0.0, photon_limited: bool = False,
            reference_exposure: float | None = None, target: str = "k",
            friction_error: float | None = None, current=None,
-           series=(1, 2, 3), laser_powers=None) -> DesignResult:
+           series=(1, 2, 3), laser_powers=None, check_units: bool = True) -> DesignResult:
     """Recommend an acquisition that minimises the expected error of the calibration.
 
     The expected errors are the Cramer-Rao bound of the Whittle Fisher information, corrected
@@ -301,13 +301,17 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
       power's SE of k is that of k at its power, carried to the reference power by k = c P
       (it trusts the proportionality; a series tests it). A candidate's ``laser_powers``
       lists the power of each recording.
+    - `check_units`: refuse values outside what a trapped bead shows, naming the likely unit
+      (k, gamma or radius in lab units, tracking_std in nm, temperature in Celsius, exposures
+      and the current design's frame intervals in ms) and warn of a max_fps below 10 Hz
+      (kHz?); as :class:`blurtrap.Recording`'s ``check_units``.
 
     **Returns:** :class:`DesignResult` (``best``, ``predicted_se``, ``summary()``,
     ``to_dict()``).
     """
     friction_se = _checked_friction(target, friction_error)
     powers = checked_powers(laser_powers)
-    ks, gamma, temperature = checked_trap(k, gamma, radius, viscosity, temperature)
+    ks, gamma, temperature = checked_trap(k, gamma, radius, viscosity, temperature, check_units)
     dt_min = 1.0 / _check("max_fps", max_fps, unit="Hz")
     if (n_frames is None) == (total_time is None):
         raise ValueError("give exactly one of n_frames (per recording) or total_time [s]")
@@ -317,6 +321,9 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     if total_time is not None:
         _check("total_time", total_time, unit="s")
     w_min = _check("min_exposure", min_exposure, unit="s")
+    if check_units:
+        check_units_of(tracking_std, max_fps, w_min, reference_exposure)
+    cur = None if current is None else checked_current(current, check_units)
     if not (0.0 <= dead_time < dt_min - w_min):
         raise ValueError(f"dead_time must be in [0, 1/max_fps - min_exposure) = [0, "
                          f"{dt_min - w_min:.3g}) s; got dead_time = {dead_time!r}")
@@ -332,15 +339,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
              _acquisition("the paper's exposure series",
                           [(dt_min, max(w_min, f * (dt_min - dead_time)), n_each(4))
                            for f in PAPER_SERIES], *common)]
-    if current is not None:
-        cur = [tuple(float(x) for x in r) for r in current]
-        for r in cur:
-            if len(r) not in (3, 4) or not (0 < r[1] <= r[0]) or (len(r) == 4 and not r[3] > 0):
-                raise ValueError(f"current: each recording needs (frame interval, exposure, "
-                                 f"frames[, laser power > 0]) with 0 < exposure <= frame "
-                                 f"interval; got {r}")
-        if len({len(r) for r in cur}) > 1:
-            raise ValueError("current: give a laser power for every recording or for none")
+    if cur is not None:
         cands.append(_acquisition("your current design", cur, *common))
     budget = total_time if total_time is not None else n_frames
     assert budget is not None  # exactly one of n_frames / total_time is given (checked above)
