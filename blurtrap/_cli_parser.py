@@ -186,9 +186,10 @@ def _add_diagnose_parser(sub):
         description="Fit the model, test whether it describes the data, and rank the "
         "physical effects that may be missing (canonical effect names), with the evidence.")
     g.add_argument("manifest", metavar="MANIFEST", help="manifest JSON (or .npz)")
-    g.add_argument("--model", type=_model_arg, default="standard",
-                   help="starting model: naive, blur, standard (default), optionally with "
-                   "effects added by '+' (e.g. standard+drift)")
+    g.add_argument("--model", type=_model_arg, default=None,
+                   help="starting model: naive, blur, standard, optionally with effects added "
+                   "by '+' (e.g. standard+drift); default: the recordings' detector (standard "
+                   "for a camera, photodiode_aa for a photodiode with anti-aliasing)")
     g.add_argument("--add", nargs="+", default=(), metavar="EFFECT",
                    help="effects added to the model before diagnosing (canonical names: "
                    "motion_blur, aliasing, tracking_noise, drift, line_noise, exposure_kernel, "

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..effects import EFFECTS, AbstractEffect, DataContext, make_effect
 from ..inference import FitError
-from ..inference.internal import chi2_sf
+from ..inference.internal import chi2_sf, volts_power
 from ._evidence import _evidence, _gof_change, _kurtosis_test, _line_candidate, _plausible
 from ._results import Candidate
 from ._screen import screen
@@ -141,19 +141,19 @@ def _lr_p_value(dll: float, dof: int) -> float:
     return p
 
 
-def _screen(recs, mdl, k, name: str, effects: tuple, warm: dict, base_nll: float):
+def _screen(inputs, mdl, k, name: str, effects: tuple, warm: dict, base_nll: float):
     """Screening refit of ``mdl`` + ``effects`` (warm start; flag effects, which can move k
     and gamma far, also from the closed-form start, keeping the better optimum; so does a
     warm refit that did not converge or ended above the base fit ``base_nll``, which a
     nested model cannot: a poor start, e.g. a held friction's value on positions in volts).
     Returns the model and the optimum."""
     test_model = mdl.add(*effects)
-    params, nll1, gof1, ok = screen(recs, test_model, k, start=warm)
+    params, nll1, gof1, ok = screen(inputs, test_model, k, start=warm)
     stuck = not ok or nll1 > base_nll + 1e-9 * (1.0 + abs(base_nll))
     if stuck or name in COUPLED_GROUPS or EFFECTS[name].kind == "flag":
         # adding a core effect can move k and gamma far from the misspecified base
         # fit: also try the closed-form start and keep the better optimum
-        cold = screen(recs, test_model, k, start=None)
+        cold = screen(inputs, test_model, k, start=None)
         if cold[1] < nll1:
             params, nll1, gof1, ok = cold
     return test_model, params, nll1, gof1, ok
@@ -189,7 +189,7 @@ def _likelihood_candidate(recs, mdl, k, base, name: str, warm: dict, effect=None
     (``None`` when the refit failed)."""
     effects, line = _candidate_effects(recs, base, name, effect)
     try:
-        test_model, params, nll1, gof1, ok = _screen(recs, mdl, k, name, effects,
+        test_model, params, nll1, gof1, ok = _screen(base.inputs, mdl, k, name, effects,
                                                      _object_start(warm, effects),
                                                      float(base.extras["nll"]))
     except (FitError, ValueError) as exc:
@@ -226,7 +226,8 @@ def try_candidates(recs, mdl, k, base, candidates) -> tuple[list[Candidate], dic
     # warm start from the base fit, except parameters it pinned at a bound (eps^2 -> 0 when a
     # deficit is missing): in log coordinates they could not move back, so they restart
     # from their closed-form values
-    warm = {n: v for n, v in base.params.items() if n not in base.at_bounds}
+    to_fit, to_si = _fit_units(base)
+    warm = to_fit({n: v for n, v in base.params.items() if n not in base.at_bounds})
     for c in candidates:
         name = candidate_name(c)
         test = "likelihood" if name in COUPLED_GROUPS else EFFECTS[name].diagnose_test
@@ -236,5 +237,23 @@ def try_candidates(recs, mdl, k, base, candidates) -> tuple[list[Candidate], dic
         cand, params = _likelihood_candidate(recs, mdl, k, base, name, warm, c)
         out.append(cand)
         if params is not None:
-            screened[name] = params
+            screened[name] = to_si(params)
     return out, screened
+
+
+def _fit_units(base):
+    """``(to_fit, to_si)``: a parameter dict from the base result's units (SI) into those of
+    the screening fits, and back. Positions in volts are fitted in volts (k and gamma in
+    N/m and N s/m per (m/V)^2, eps^2 in V^2, ...) and reported in SI through the fitted
+    displacement sensitivity Rd; comparing the two (warm starts, "moves k by ... SE") mixed
+    them (an independent pass: 'adding detector_filter moves k by -12 SE' on correct data).
+    The screening optima are carried to SI with the base fit's Rd."""
+    rd = base.params.get("displacement_sensitivity")
+    if rd is None or not (np.isfinite(rd) and rd > 0):
+        return dict, dict
+
+    def scaled(p, sign):
+        return {n: v * rd ** (sign * volts_power(n)) for n, v in p.items()
+                if n not in ("displacement_sensitivity", "force_sensitivity")}
+
+    return (lambda p: scaled(p, -1)), (lambda p: scaled(p, 1))

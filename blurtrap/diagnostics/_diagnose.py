@@ -124,7 +124,7 @@ _DETECTOR = frozenset({"motion_blur", "aliasing"})
 _WITH_DETECTOR = _DETECTOR | {"tracking_noise"}
 
 
-def _declared_detector(ranked: list, screened: dict, base) -> list[str]:
+def _declared_detector(ranked: list, screened: dict, base, settings) -> list[str]:
     """When no candidate is significant but a candidate made of the detector physics the
     recording declares (its exposure's blur, its sampling's aliasing, with or without the
     tracking-noise floor) moves k or gamma by more than SENSITIVITY_SE of the base fit's errors
@@ -132,7 +132,8 @@ def _declared_detector(ranked: list, screened: dict, base) -> list[str]:
     model lacks what the instrument does by construction, and its answer is that many SE off
     (issue: a W = dt camera recording fitted with ``naive``). The most complete such candidate
     is marked ``required`` and ranked first (it is then refitted). Returns the note."""
-    if not ranked or any(c.significant for c in ranked):
+    if not ranked or any(c.significant for c in ranked) or settings.get("anti_aliasing"):
+        # a photodiode with anti-aliasing declares neither blur nor folding
         return []
     best = None
     for i, c in enumerate(ranked):
@@ -246,7 +247,7 @@ def diagnose(data, model=None, *, candidates=None, alpha: float = 0.05, k: str |
     out, screened = try_candidates(recs, mdl, k, base, candidates)
     ranked = _rank(out, threshold)
     notes += _prefer_complete(ranked, screened, base)
-    notes += _declared_detector(ranked, screened, base)
+    notes += _declared_detector(ranked, screened, base, settings)
     notes += _refit_best(recs, k, base, ranked, screened)
     notes += _sensitivity_notes(base, ranked, screened)
     gof_ok = base.gof["p_value"] >= threshold

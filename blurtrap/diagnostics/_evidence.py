@@ -197,12 +197,19 @@ def moved_by(base: CalibrationResult, before: dict, after: dict) -> dict:
     return out
 
 
+#: a candidate whose fit is worse than the base by more than this (chi^2_1 at 95 %, halved)
+#: is one the data tell apart and reject: no "cannot tell the two apart" note for it
+_WORSE_DLOGL = 1.92
+
+
 def _sensitivity_notes(base: CalibrationResult, ranked, screened) -> list[str]:
     out = []
     for c in ranked:
         params = screened.get(c.effect)
         if c.significant or c.required or params is None or not c.plausible:
             continue
+        if c.delta_loglik is not None and c.delta_loglik < -_WORSE_DLOGL:
+            continue  # the data reject it (e.g. folding a photodiode's anti-aliased spectrum)
         shifts = [f"{n} by {z:+.1f} SE" for n, z in moved_by(base, base.params, params).items()]
         if shifts:
             out.append(f"{c.effect} is not significant, but adding it moves {', '.join(shifts)}: "

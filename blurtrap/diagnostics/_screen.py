@@ -17,7 +17,13 @@ from ..inference.internal import screen_model
 
 
 @float64_scope
-def screen(recs, model, k, start=None):
+def screen(inputs, model, k, start=None):
     """Screening Whittle fit of ``model`` without standard errors: ``(params dict, nll, gof,
-    ok)`` (:func:`blurtrap.inference._ml_fits.screen_model`)."""
-    return screen_model(recs, model, k, start=start)
+    ok)`` (:func:`blurtrap.inference._ml_fits.screen_model`) on the base fit's ``inputs``
+    (:class:`blurtrap.inference.FitInputs`: the recordings as the instrument prepared them and
+    the band it fitted, so that the log-likelihoods compare with the base fit's: a photodiode
+    with anti-aliasing is fitted below 0.4 fs; screened over every ordinate, each candidate
+    gained ~2e4 in log-likelihood on correct data)."""
+    excluded = list(inputs.excluded) or None
+    return screen_model(list(inputs.recordings), model, k, start=start,
+                        f_range=inputs.f_range, excluded=excluded)

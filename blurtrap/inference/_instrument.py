@@ -186,8 +186,10 @@ def _clean_lines(recs, sts, lines, notes, excluded):
                          f"{abs(resp.ratio):.5g} +- {resp.ratio_se:.2g} "
                          f"{getattr(r, 'position_unit', 'm')} per m (active "
                          "calibration; the line is removed before the passive fit)")
-        if lines == "keep":
-            out.append(r)
+        if lines == "keep":  # other lines kept; the declared drive is removed all the same
+            drv = tuple(ln for ln in find_lines(x, dt, known=(resp.frequency,), max_lines=0)
+                        if ln.known) if f_d is not None else ()
+            out.append(r.replace(positions=remove_lines(x, dt, drv)) if drv else r)
             continue
         from ._frames import _outliers
 

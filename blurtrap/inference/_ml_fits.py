@@ -189,13 +189,14 @@ def _robust_refit(out, held, args, scale, layout, fixed, notes, method, strict, 
 
 
 @float64_scope
-def screen_model(recs, model, k, start=None):
+def screen_model(recs, model, k, start=None, f_range=None, excluded=None):
     """Whittle fit of ``model`` without standard errors: ``(params dict, nll, gof, ok)``.
     Same ordinates and objective as ``calibrate(method='likelihood', likelihood='whittle')``
-    so that log-likelihoods of nested models are comparable."""
+    on the recordings and band it fitted (``result.inputs``: ``f_range``, ``excluded``) so
+    that log-likelihoods of nested models are comparable."""
     mdl = get_model(model)
     layout = make_layout(recs, k, mdl.noise, tuple(p.name for p in mdl.extra_params))
-    args = _spectral_args(recs, layout, mdl, 1, None)
+    args = _spectral_args(recs, layout, mdl, 1, f_range, excluded)
     scale = _start_vector(recs, layout, mdl.noise, start)
     p, nll, ok = fit_nll_only(spectral_nll, scale, args)
     psd = _psd_jit(jnp.asarray(p), args)

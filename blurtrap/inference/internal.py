@@ -10,6 +10,7 @@ from ._fit import chi2_sf
 from ._fit_inputs import html_table
 from ._frames import _inspect_frames as inspect_frames
 from ._frames import mean_shift
+from ._instrument import _power_of as volts_power
 from ._instrument import default_model
 from ._ml_fits import screen_model
 from ._recordings import as_recordings
@@ -26,4 +27,5 @@ __all__ = [
     "np_periodogram",
     "refuse_without_temporal_information",
     "screen_model",
+    "volts_power",
 ]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from blurtrap.diagnostics._screen import screen
+from blurtrap.inference._fit_inputs import FitInputs
 from blurtrap.inference._models import get_model
 from blurtrap.inference._problems import spectral_nll
 from blurtrap.simulate import PhotodiodeFilter
@@ -31,8 +32,9 @@ def test_screening_fit_matches_exact_screening():
     within 1e-4 relative), and the same goodness of fit."""
     rec = _record(1e-5, 1e-9, 2**14, seed=3, injections=(PhotodiodeFilter(8e3, 0.4),))
     model = get_model("standard").add("detector_filter")
-    p_new, nll_new, gof_new, ok_new = screen([rec], model, "shared")
-    p_old, nll_old, gof_old, ok_old = screen([rec], dataclasses.replace(model, fold_nodes=0),
+    inputs = FitInputs((rec,), model)
+    p_new, nll_new, gof_new, ok_new = screen(inputs, model, "shared")
+    p_old, nll_old, gof_old, ok_old = screen(inputs, dataclasses.replace(model, fold_nodes=0),
                                              "shared")
     assert ok_new and ok_old
     assert abs(nll_new - nll_old) < 1e-3
