@@ -44,7 +44,7 @@ from ._calibrate import _default_k_mode, calibrate
 from ._log_posterior import _compiled_log_posterior, _PostArgs
 from ._models import get_model
 from ._pointwise import Pointwise, exact_pointwise, spectral_pointwise
-from ._posterior_priors import _check_user_priors, _resolve_priors
+from ._posterior_priors import _check_user_priors, _resolve_priors, check_prior_units, prior_conflict_notes
 from ._posterior_result import Posterior, _derived
 from ._priors import LogUniform, Uniform
 from ._problems import make_exact_args, make_layout
@@ -151,6 +151,8 @@ def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
             f"got n_walkers = {n_walkers}"
         )
     prior_objs, user_fns = _resolve_priors(layout, priors)
+    check_prior_units(layout.names, prior_objs,
+                      any(str(getattr(r, "position_unit", "m")) == "V" for r in recs))
     _check_user_priors(user_fns, layout.names)
 
     # ---- maximum-likelihood start ------------------------------------------------------
@@ -158,6 +160,9 @@ def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
                    f_range=f_range)
     if tuple(ml.param_names) != tuple(layout.names):  # pragma: no cover - defensive
         raise AssertionError((ml.param_names, layout.names))
+    conflicts = prior_conflict_notes(layout.names, prior_objs, ml.values, list(ml.errors))
+    if conflicts:  # shown with the ML start's notes (Posterior.notes)
+        ml = dataclasses.replace(ml, notes=tuple(ml.notes) + tuple(conflicts))
     # the likelihood sees what the fit saw: lines subtracted, the band and the ranges it
     # left out (the raw recordings gave gamma 23 SE high with a 50 Hz line that calibrate
     # had removed: an independent pass)

@@ -8,9 +8,10 @@ from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._posterior_result import _base
-from ._priors import DEFAULT_BOUNDS, LogUniform, Prior, Uniform
+from ._priors import DEFAULT_BOUNDS, LogNormal, LogUniform, Normal, Prior, Uniform
 
 
 def _resolve_priors(layout, priors) -> tuple[tuple, tuple]:
@@ -69,6 +70,83 @@ def _resolve_priors(layout, priors) -> tuple[tuple, tuple]:
             raise ValueError(f"priors: no default prior for parameter {name!r}; give one, "
                              f"e.g. priors={{{name!r}: LogUniform(low, high)}}")
     return tuple(out), tuple(fns)
+
+
+def _prior_range(prior):
+    """Where most of a prior's mass lies, ``(low, high)`` in its parameter's units, or None."""
+    def f(v):
+        return float(np.max(np.asarray(v, dtype=float)))
+
+    if isinstance(prior, (LogUniform, Uniform)):
+        return f(prior.low), f(prior.high)
+    if isinstance(prior, Normal):
+        return f(prior.mean) - 3 * f(prior.sd), f(prior.mean) + 3 * f(prior.sd)
+    if isinstance(prior, LogNormal):
+        return f(prior.median) * math.exp(-3 * f(prior.sigma)), f(prior.median) * math.exp(
+            3 * f(prior.sigma))
+    return None
+
+
+def check_prior_units(names, priors, volts=False) -> None:
+    """A prior of k, c or gamma that puts (almost) no mass in the physically plausible range
+    of its quantity (``Param.bounds``, the default prior's support) is a ValueError naming
+    the likely unit slip (lab units instead of SI): the posterior of such a prior is the
+    flat-prior one, silently (an independent pass: Normal(0.0268, 5e-4) for gamma in
+    pN s/um, a 2 % prior, changed nothing). Not for positions in volts."""
+    from ..effects import QUANTITIES
+
+    for name, prior in zip(names, priors):
+        base = _base(name)
+        q = QUANTITIES.get(base)
+        rng = _prior_range(prior)
+        if volts or base not in ("k", "c", "gamma") or q is None or q.bounds is None \
+                or rng is None:
+            continue
+        lo, hi = q.bounds
+        if rng[1] >= lo and rng[0] <= hi:
+            continue
+        raise ValueError(
+            f"priors[{base!r}] = {type(prior).__name__}(...) puts its mass at {rng[0]:.3g}..{rng[1]:.3g} "
+            f"{q.unit}, outside the plausible range of the {q.description}, {lo:g}..{hi:g} "
+            f"{q.unit} ({lo * q.lab_factor:g}..{hi * q.lab_factor:g} {q.lab_unit}): this looks "
+            f"like a unit slip; priors take SI ({q.unit}; 1 {q.lab_unit} = "
+            f"{1 / q.lab_factor:g} {q.unit})")
+
+
+#: a prior whose mass lies this many combined standard deviations from the data's maximum-
+#: likelihood value conflicts with the data (a note names it)
+CONFLICT_Z = 5.0
+
+
+def prior_conflict_notes(names, priors, values, errors) -> list[str]:
+    """Notes for priors that conflict with the data's maximum-likelihood estimate (more than
+    :data:`CONFLICT_Z` combined SDs apart; on log scale for LogNormal; outside a uniform's
+    bounds by more than CONFLICT_Z SE): where they conflict, an informative prior drives the
+    posterior, and a value in another unit (pN/nm given as N/m) is the likeliest cause."""
+    out = []
+    for name, prior, v, se in zip(names, priors, values, errors):
+        v, se = float(v), float(se)
+        se = se if math.isfinite(se) else 0.0
+        if isinstance(prior, Normal):
+            m, sd = float(np.max(prior.mean)), float(np.max(prior.sd))
+            z = abs(v - m) / math.hypot(sd, se)
+            where = f"Normal({m:.4g}, {sd:.2g})"
+        elif isinstance(prior, LogNormal) and v > 0:
+            m, sg = float(np.max(prior.median)), float(np.max(prior.sigma))
+            z = abs(math.log(v / m)) / math.hypot(sg, se / v)
+            where = f"LogNormal(median {m:.4g}, sigma {sg:.2g})"
+        elif isinstance(prior, (Uniform, LogUniform)):
+            lo, hi = float(np.max(prior.low)), float(np.max(prior.high))
+            z = max(lo - v, v - hi, 0.0) / se if se > 0 else 0.0
+            where = f"{type(prior).__name__}({lo:.4g}, {hi:.4g})"
+        else:
+            continue
+        if z > CONFLICT_Z:
+            out.append(f"prior on {name}, {where}, conflicts with the data: their "
+                       f"maximum-likelihood value is {v:.4g} +- {se:.2g} (SI), {z:.3g} combined "
+                       "SD away, so the posterior follows the prior there; check its value and "
+                       "unit (priors take SI: 1 pN/nm = 1e-3 N/m, 1 pN s/um = 1e-6 N s/m)")
+    return out
 
 
 _TRACER_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
