@@ -285,18 +285,22 @@ def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):
 def profile_intervals(nll, args, scale, value, cov, at_bound, hessian="auto"):
     """Profile 95 % intervals of every parameter: ``(low, high, ok)`` numpy arrays (natural
     units; ``ok`` False where a root find or a profile fit did not converge)."""
+    low, high, ok_lo, ok_hi = profile_ends(nll, args, scale, value, cov, at_bound, hessian)
+    return low, high, ok_lo & ok_hi
+
+
+def profile_ends(nll, args, scale, value, cov, at_bound, hessian="auto"):
+    """:func:`profile_intervals` with an ok flag per end: ``(low, high, ok_low, ok_high)``."""
     scale = jnp.asarray(scale)
     x_hat = jnp.log(jnp.maximum(jnp.asarray(value), 1e-300) / scale)
     x_hat = jnp.maximum(x_hat, _LOG_ZERO)
     cov = np.nan_to_num(np.asarray(cov, float), nan=0.0)
     pass_fn = chunked_pass(nll, args, hessian, _FD_STEP)
     if pass_fn is not None:  # loops on the host, pass in chunks: nothing compiled per length
-        low, high, ok_lo, ok_hi = host_profile_ends(pass_fn, scale, x_hat, cov, at_bound,
-                                                    _consts())
-        return low, high, ok_lo & ok_hi
+        return host_profile_ends(pass_fn, scale, x_hat, cov, at_bound, _consts())
     low, high, ok_lo, ok_hi, _ = _profile_ends(
         nll, args, scale, x_hat, jnp.asarray(cov), jnp.asarray(at_bound, bool), hessian)
-    return np.asarray(low), np.asarray(high), np.asarray(ok_lo) & np.asarray(ok_hi)
+    return np.asarray(low), np.asarray(high), np.asarray(ok_lo), np.asarray(ok_hi)
 
 
 class ProfileIntervals:
@@ -321,11 +325,12 @@ class ProfileIntervals:
                              pass_fn, self.scale)
         if not need.any():
             return {}, {}
-        low, high, ok = profile_intervals(self.nll, self.args, self.scale, self.value,
-                                          self.cov, self.at_bound, self.hessian)
+        low, high, ok_lo, ok_hi = profile_ends(self.nll, self.args, self.scale, self.value,
+                                               self.cov, self.at_bound, self.hessian)
         ivs, kinds = {}, {}
         for j, name in enumerate(names):
-            if need[j]:
-                ivs[name] = (float(low[j]), float(high[j])) if ok[j] else (np.nan, np.nan)
+            if need[j]:  # an end whose profile did not converge is NaN (the result fills it)
+                ivs[name] = (float(low[j]) if ok_lo[j] else np.nan,
+                             float(high[j]) if ok_hi[j] else np.nan)
                 kinds[name] = "profile"
         return ivs, kinds

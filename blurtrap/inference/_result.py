@@ -10,6 +10,7 @@ import numpy as np
 
 from .._constants import BOLTZMANN
 from ..effects import QUANTITIES
+from ._intervals import merge
 
 #: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
 Z95 = 1.959963984540054
@@ -189,12 +190,7 @@ class CalibrationResult:
         if self._interval_cache is None:
             ivs, kinds = self._wald_intervals()
             if self.interval_source is not None:
-                more, more_kinds = self.interval_source(self)
-                for n, iv in more.items():
-                    if all(math.isfinite(e) for e in iv):
-                        ivs[n], kinds[n] = iv, more_kinds[n]
-                    else:  # the profile did not converge: the Wald interval, labelled so
-                        kinds[n] += f" ({more_kinds[n]} did not converge)"
+                merge(ivs, kinds, *self.interval_source(self))
             object.__setattr__(self, "_interval_cache", (ivs, kinds))
             return ivs, kinds
         return self._interval_cache
@@ -212,7 +208,8 @@ class CalibrationResult:
         ``"log-wald"`` (a positive parameter whose Wald interval would reach below 0 where
         no profile is available: ``value exp(+-1.96 SE/value)``); ``"wald (profile did not
         converge)"`` (or ``"log-wald (...)"``) where a profile was wanted but one of its fits
-        failed (k of a record ~10 relaxation times long)."""
+        failed (k of a record ~10 relaxation times long), ``"profile (upper end wald: its
+        profile did not converge)"`` where one end converged and is kept."""
         return dict(self._interval_table()[1])
 
     @property

@@ -145,6 +145,11 @@ def test_failed_profile_falls_back_to_the_labelled_wald_interval():
     assert bad.intervals["k"] == pytest.approx((k - 1.959964 * se, k + 1.959964 * se))
     assert bad.interval_kinds["k"] == "wald (profile did not converge)"
     assert bad.intervals["gamma"] == (1.0, 2.0) and bad.interval_kinds["gamma"] == "profile"
+    # one end converged: it is kept (it was discarded with its twin), the other is Wald's
+    half = dataclasses.replace(res, interval_source=lambda r: (
+        {"k": (math.nan, 2 * k)}, {"k": "profile"}))
+    assert half.intervals["k"] == pytest.approx((k - 1.959964 * se, 2 * k))
+    assert half.interval_kinds["k"] == "profile (lower end wald: its profile did not converge)"
 
 
 def test_short_records_have_finite_intervals():
