@@ -14,6 +14,7 @@ Outcome per case:
     python benchmarks/study_trust.py --second          # the second pass's classes only
     python benchmarks/study_trust.py --third           # the third pass's (_trust_third.py)
     python benchmarks/study_trust.py --fourth          # the fourth pass's (_trust_fourth.py)
+    python benchmarks/study_trust.py --fifth           # the fifth pass's (_trust_fifth.py)
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ import blurtrap as bt
 from blurtrap.inference import FitError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _trust_fifth import EXPECTED as FIFTH_EXPECTED  # noqa: E402
+from _trust_fifth import fifth_pass_cases  # noqa: E402
 from _trust_fourth import EXPECTED as FOURTH_EXPECTED  # noqa: E402
 from _trust_fourth import fourth_pass_cases  # noqa: E402
 from _trust_third import EXPECTED as THIRD_EXPECTED  # noqa: E402
@@ -259,7 +262,7 @@ EXPECTED = {  # the outcome each class must have; anything else is listed as a f
     "held": ("noted", "clear error"), "implausible:": "clear error", "implausible fit": "noted",
     "unused": "noted", "equipartition": "noted", "nonstationary": ("noted", "clear error"),
     "pooled": "noted", "duplicate": "clear error", "white frames": "clear error",
-    "batch": "honest", **THIRD_EXPECTED, **FOURTH_EXPECTED,
+    "batch": "honest", **THIRD_EXPECTED, **FOURTH_EXPECTED, **FIFTH_EXPECTED,
 }
 
 
@@ -272,18 +275,22 @@ def main(argv=None):
                     help="only the classes of the third independent pass (session 23)")
     ap.add_argument("--fourth", action="store_true",
                     help="only the classes of the fourth independent pass (session 24)")
+    ap.add_argument("--fifth", action="store_true",
+                    help="only the classes of the fifth independent pass (session 25)")
     a = ap.parse_args(argv)
     bt.enable_x64()
     t0 = time.time()
     rows = []
     gens = (offset_cases, detector_cases, unit_cases, batch_cases, json_cases,
-            second_pass_cases, third_pass_cases, fourth_pass_cases)
+            second_pass_cases, third_pass_cases, fourth_pass_cases, fifth_pass_cases)
     if a.second:
         gens = (second_pass_cases,)
     if a.third:
         gens = (third_pass_cases,)
     if a.fourth:
         gens = (fourth_pass_cases,)
+    if a.fifth:
+        gens = (fifth_pass_cases,)
     for gen in gens:
         for name, res in gen():
             want = next(v for k, v in EXPECTED.items() if name.startswith(k))
