@@ -101,6 +101,7 @@ def _check_range(name: str, values, given_as: str = "") -> None:
     """Each of `values` within the plausible range of quantity `name` (``Param.bounds``, the
     support of calibrate's default priors), else a ValueError naming the lab unit that fits."""
     q = QUANTITIES[name]
+    assert q.bounds is not None  # k and gamma have plausible ranges
     lo, hi = q.bounds
     for v in values:
         if lo <= v <= hi:
