@@ -148,9 +148,15 @@ def _end_point(held, scale, args, x_hat, at_bound, i_mask, side, d1, slope, x_li
         # the trial: the held profile fit at th_i + side d (the minimum on the first pass)
         psi = jnp.maximum(th_i + side * d, _ZERO_FRACTION * th_i)
         t = jnp.where(first, 0.0, jnp.maximum(jnp.log(jnp.maximum(psi, 0.0) / sc_i), _LOG_ZERO))
-        p0 = scale * jnp.exp(x) + side * (d - d_prev) * slope
-        moved = jnp.where(p0 > 0.5 * scale * jnp.exp(x), jnp.log(jnp.maximum(p0, 1e-300) / scale),
-                          x)
+        p_now = scale * jnp.exp(x)
+        p0 = p_now + side * (d - d_prev) * slope
+        # below half its value, the same regression on log scale (``_profile_host``)
+        psi_prev = jnp.maximum(th_i + side * d_prev, _ZERO_FRACTION * th_i)
+        ratio = jnp.log(jnp.maximum(psi, 1e-300) / jnp.maximum(psi_prev, 1e-300))
+        log_step = jnp.where((psi_prev > 0) & (psi > 0), jnp.clip(
+            slope * psi_prev / jnp.maximum(p_now, 1e-300) * ratio, -10.0, 10.0), 0.0)
+        moved = jnp.where(p0 > 0.5 * p_now, jnp.log(jnp.maximum(p0, 1e-300) / scale),
+                          x + log_step)
         v, x_new, ok_fit = _fit_held(held, scale, args, i_mask & ~first, t,
                                      jnp.where(first, x_hat, moved), x_lift)
         # first pass: the minimum, the estimate theta_i and the lower side's bound 0

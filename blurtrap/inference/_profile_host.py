@@ -121,7 +121,15 @@ def _root_find(fits, scale, x_first, v_min, th_i, i, side, d1, slope, x_lift, c)
         t = max(math.log(psi / scale[i]), c["log_zero"]) if psi > 0 else c["log_zero"]
         p_now = scale * np.exp(x)
         p0 = p_now + side * (d - d_prev) * slope
-        moved = np.where(p0 > 0.5 * p_now, np.log(np.maximum(p0, 1e-300) / scale), x)
+        # where the straight line would take a parameter below half its value, follow the
+        # same regression on log scale (d log p = slope psi / p d log psi): left in place, a
+        # friction at k / 3 led the held fit to the white-noise optimum (gamma 5e6 x) and
+        # every later trial with it, so k's lower end came out at the estimate
+        psi_prev = max(th_i + side * d_prev, c["zero_fraction"] * th_i)
+        log_step = np.clip(slope * psi_prev / np.maximum(p_now, 1e-300)
+                           * math.log(psi / psi_prev), -10.0, 10.0) if psi_prev > 0 else 0.0
+        moved = np.where(p0 > 0.5 * p_now, np.log(np.maximum(p0, 1e-300) / scale),
+                         x + log_step)
         v, x, ok_fit = fits.fit(i_mask, t, moved, x_lift)
         g = math.sqrt(2.0 * max(v - v_min, 0.0)) - z95
         ok = ok and ok_fit and math.isfinite(g)
