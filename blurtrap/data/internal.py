@@ -4,12 +4,13 @@ Not part of the user-facing API (that is :mod:`blurtrap.data` and the top-level 
 names) and without a stability promise; it exists so that no other subpackage imports a
 private module of ``blurtrap.data`` (issue 16, clean boundaries). Each name is the data
 layer's own object, re-exported unchanged: the unit-slip thresholds of :class:`Recording`
-and its instrument metadata, and the helpers that name the likely unit.
+and its instrument metadata (also for calibrate_batch's rows), and the helpers that name the likely unit.
 """
 
 from ._instrument import _MAX_BEAD_RADIUS_M as MAX_BEAD_RADIUS_M
 from ._plausible import _MAX_PLAUSIBLE_INTERVAL_S as MAX_PLAUSIBLE_INTERVAL_S
 from ._plausible import _MAX_PLAUSIBLE_POSITION_STD_M as MAX_PLAUSIBLE_POSITION_STD_M
+from ._plausible import _MIN_PLAUSIBLE_POSITION_STD_M as MIN_PLAUSIBLE_POSITION_STD_M
 from ._plausible import _check_temperature as check_temperature
 from ._plausible import _likely_unit as likely_position_unit
 from ._plausible import in_ms_message
@@ -18,6 +19,7 @@ __all__ = [
     "MAX_BEAD_RADIUS_M",
     "MAX_PLAUSIBLE_INTERVAL_S",
     "MAX_PLAUSIBLE_POSITION_STD_M",
+    "MIN_PLAUSIBLE_POSITION_STD_M",
     "check_temperature",
     "in_ms_message",
     "likely_position_unit",

@@ -106,7 +106,9 @@ def calibrate_batch(
 
     - the checks of a ``Recording``: NaN/inf frames (``"invalid: NaN at frame 17"``), a
       constant trace (``"constant trace"``) and, with ``check_units`` (default), positions
-      whose standard deviation exceeds 10 um (``"invalid: positions look like nm ..."``);
+      whose standard deviation exceeds 10 um (``"invalid: positions look like nm ..."``) or
+      lies below 0.02 nm, and after the fit a k or gamma outside any trapped bead's range
+      (``"implausible: ..."``, values kept);
       frame interval or exposure above 1 s or a temperature below 100 K concern every row
       and raise ``ValueError``;
     - the refusal of frames without temporal information (lag-1 correlation below 5
@@ -180,6 +182,8 @@ def calibrate_batch(
     z = stats[:, 5]
     status, gof_p = _statuses(val, converged, pd, gof, skip, pre, z, gof_dof, gof_threshold,
                               f, m, n, dt, per, nbin, n_blocks)
+    for i in np.flatnonzero(status == "ok") if check_units else ():
+        status[i] = checks.implausible_status(val[i, 0], val[i, 1]) or "ok"
     refused = np.array([s.startswith(("invalid", "refused", "inadequate", "constant"))
                         for s in status])
     val[refused] = np.nan

@@ -14,6 +14,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from ..data.internal import MIN_PLAUSIBLE_POSITION_STD_M
 from ._fit import chi2_sf
 from ._frames import histogram_checks, temporal_information
 
@@ -108,7 +109,7 @@ def prefit_status(stats: np.ndarray, check_units: bool) -> np.ndarray:
     nbad, first, isnan, const, std, z = stats.T
     flagged = (nbad > 0) | (const > 0) | ~(z > Z_MIN)
     if check_units:
-        flagged |= std > MAX_POSITION_STD_M
+        flagged |= (std > MAX_POSITION_STD_M) | (std < MIN_PLAUSIBLE_POSITION_STD_M)
     for i in np.flatnonzero(flagged):  # strings only for the (few) rows not fitted
         if nbad[i] > 0:
             more = f" ({int(nbad[i])} non-finite values)" if nbad[i] > 1 else ""
@@ -118,11 +119,31 @@ def prefit_status(stats: np.ndarray, check_units: bool) -> np.ndarray:
         elif check_units and std[i] > MAX_POSITION_STD_M:
             status[i] = (f"invalid: positions look like nm or pixels, not m (std {std[i]:.3g} m "
                          "> 10 um)")
+        elif check_units and std[i] < MIN_PLAUSIBLE_POSITION_STD_M:
+            status[i] = (f"invalid: positions far too small for metres (std {std[i]:.3g} m < "
+                         f"{MIN_PLAUSIBLE_POSITION_STD_M:g} m, less than any trapped bead moves): "
+                         "check the position unit")
         else:
             status[i] = (f"refused: no temporal information (lag-1 correlation {z[i]:.1f} SE "
                          "above 0: dt >> tau, or tracking noise swamps the motion); gamma not "
                          "identifiable from one exposure")
     return status
+
+
+def implausible_status(k: float, gamma: float) -> str:
+    """calibrate's plausibility note per item: a k or gamma outside any trapped bead's range
+    (``Param.bounds``) is almost always a position unit slip (an independent pass: positions
+    in mm gave status "ok" with k 1e-6 x the truth). ``""`` when both are in range."""
+    from ..effects import QUANTITIES
+
+    bad = []
+    for name, v in (("k", k), ("gamma", gamma)):
+        q = QUANTITIES[name]
+        assert q.bounds is not None
+        if math.isfinite(v) and v > 0 and not q.bounds[0] <= v <= q.bounds[1]:
+            bad.append(f"{name} = {v:.3g} {q.unit}, expected {q.bounds[0]:g}..{q.bounds[1]:g}")
+    return ("implausible: " + "; ".join(bad) + " (a trapped bead lies within these ranges): "
+            "check the position unit") if bad else ""
 
 
 def no_information_status(z: float) -> str:

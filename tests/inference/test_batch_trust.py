@@ -225,3 +225,23 @@ def test_refusals_number_items_across_the_whole_batch():
     for i in (3, 67):
         assert b.status[i].startswith(f"refused: item {i} "), b.status[i]
     assert sum(s.startswith("refused") for s in b.status) == 2
+
+
+def test_rows_in_another_unit_in_the_plausible_std_range_are_named():
+    """Positions in mm (std ~5 um, under the 10 um check) came back "ok" with k and gamma
+    1e-6 x the truth, and 1000 x too small ones "ok" with 1e6 x (a sixth independent pass);
+    calibrate notes the first and refuses the second. Now: "implausible" (values kept) and
+    "invalid". A stiff trap (std 4.5 nm) sampled at dt = tau / 2."""
+    k = 2e-4
+    dt = 0.5 * GAMMA / k
+    x = ar1(k, 8192, 3, seed=9, dt=dt, eps=0.2e-9)
+    kw = dict(frame_interval=dt, exposure=1e-9 * dt)
+    mm = bt.calibrate_batch(x * 1e3, **kw)
+    assert all(s.startswith("implausible: ") and "gamma = " in s
+               and "check the position unit" in s for s in mm.status), mm.status
+    assert np.allclose(mm.k / k, 1e-6, rtol=0.3) and not mm.success.any()
+    tiny = bt.calibrate_batch(x * 1e-3, **kw)
+    assert all(s.startswith("invalid: positions far too small") for s in tiny.status)
+    ok = bt.calibrate_batch(x, **kw)
+    assert ok.success.all(), ok.status
+    assert bt.calibrate_batch(x * 1e3, **kw, check_units=False).success.all()
