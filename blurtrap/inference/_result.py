@@ -181,6 +181,8 @@ class CalibrationResult:
             if n.split("[")[0] in _POSITIVE and v > 0 and v - h < 0:
                 ivs[n] = (float(v * math.exp(-h / v)), float(v * math.exp(h / v)))
                 kinds[n] = "log-wald"
+            elif n == "tracking_var" and v - h < 0 <= v:  # a variance: not below its bound
+                ivs[n], kinds[n] = (0.0, float(v + h)), "wald (cut at 0)"
         for n in self.at_bounds:
             if n in ivs:
                 ivs[n] = (0.0, math.nan)
@@ -209,7 +211,8 @@ class CalibrationResult:
         no profile is available: ``value exp(+-1.96 SE/value)``); ``"wald (profile did not
         converge)"`` (or ``"log-wald (...)"``) where a profile was wanted but one of its fits
         failed (k of a record ~10 relaxation times long), ``"profile (upper end wald: its
-        profile did not converge)"`` where one end converged and is kept."""
+        profile did not converge)"`` where one end converged and is kept; ``"wald (cut at
+        0)"``: eps^2 (a variance) whose Wald interval would reach below 0, no profile."""
         return dict(self._interval_table()[1])
 
     @property

@@ -272,3 +272,15 @@ def test_stiffness_and_friction_at_their_bound_are_refused(kw):
     x = circulant_frames(1e-3, g, DT, DT, 4e-16, 65536, 0, temperature=T)
     with pytest.raises(bt.FitError, match="dt >> tau"):
         bt.calibrate(_rec(x), **kw)
+
+
+def test_a_wald_interval_of_eps2_stops_at_zero():
+    """Where no profile is available (method='allan', a sixth independent pass) eps^2's
+    Wald interval reached below 0: a variance's interval is cut at its bound."""
+    res = bt.calibrate(_rec(_frames(16384, 21)), likelihood="whittle")
+    v, se = res.tracking_var, res["tracking_var"].error
+    wide = dataclasses.replace(res, covariance=np.asarray(res.covariance) * (
+        (0.8 * v / se) ** 2), interval_source=None)
+    lo, hi = wide.intervals["tracking_var"]
+    assert wide.interval_kinds["tracking_var"] == "wald (cut at 0)"
+    assert lo == 0.0 and hi == pytest.approx(v + 1.959964 * 0.8 * v)
