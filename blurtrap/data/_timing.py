@@ -61,6 +61,27 @@ def rounded_resolution(steps: np.ndarray) -> float | None:
     return q
 
 
+def stamp_quantum(steps: np.ndarray) -> float | None:
+    """The resolution q [s] of time stamps whose `steps` (dropped frames and all) take a few
+    values (at most 64, float noise merged), every one an integer multiple of q, the shortest
+    at least 2 q: stamps written with too few digits (1500 frames/s in us with dropped frames:
+    steps of 666, 667, 1333 and 1334 us). None otherwise: stamps at full precision (steps of
+    dt and 2 dt: "q" = dt), or continuous jitter (many values)."""
+    steps = np.asarray(steps, dtype=float)
+    if steps.size < 2 or not np.all(steps > 0):
+        return None
+    u = np.unique(steps)  # sorted
+    cut = np.flatnonzero(np.diff(u) > 1e-6 * float(np.median(steps))) + 1
+    if not 1 <= cut.size <= 63:
+        return None
+    centres = np.array([float(g.mean()) for g in np.split(u, cut)])
+    q = float(np.min(np.diff(centres)))
+    m = centres / q
+    if not (np.all(np.abs(m - np.round(m)) < 0.01) and m[0] > 1.5):
+        return None
+    return q
+
+
 def _tolerance_for(q: float, frame_interval: float) -> float:
     """``q / frame_interval`` rounded up to two significant digits: a timing_tolerance that
     accepts stamps rounded to q (their median step is within q of the interval, and they lie
@@ -78,7 +99,7 @@ def _rounded_hint(steps: np.ndarray, t: np.ndarray, frame_interval: float, tol: 
     q = rounded_resolution(steps)
     mean = float(t[-1] - t[0]) / (t.shape[0] - 1)
     if q is None or not abs(mean - frame_interval) <= tol * frame_interval + q / (t.shape[0] - 1):
-        return ""
+        return _rounded_dropped_hint(steps, frame_interval)
     values = ", ".join(_g(v) for v in np.unique(np.round(steps / q)) * q)
     not_what = "jitter or dropped frames" if irregular else "a unit slip"
     return (
@@ -88,6 +109,29 @@ def _rounded_hint(steps: np.ndarray, t: np.ndarray, frame_interval: float, tol: 
         f"{_g(mean)} s matches frame_interval = {_g(frame_interval)} s. This is rounding, not "
         f"{not_what}: pass timing_tolerance={_tolerance_for(q, frame_interval):g} (relative; a "
         "manifest key too) to accept them, or write the times with more digits"
+    )
+
+
+def _rounded_dropped_hint(steps: np.ndarray, frame_interval: float) -> str:
+    """The sentence of :func:`_rounded_hint` for rounded stamps with dropped frames: steps of
+    a few multiples of a resolution q (:func:`stamp_quantum`), each within q of a whole number
+    of frame intervals; else ""."""
+    q = stamp_quantum(steps)
+    if q is None or q > 0.25 * frame_interval:
+        return ""
+    whole = np.maximum(np.round(steps / frame_interval), 1.0)
+    if float(np.max(np.abs(steps - whole * frame_interval))) > q * (1.0 + 1e-6):
+        return ""
+    values = np.unique(np.round(steps / q)) * q
+    shown = ", ".join(_g(v) for v in values[:6]) + (" ..." if values.size > 6 else "")
+    return (
+        f". The time stamps look rounded to a resolution of {_g(q)} s, "
+        f"{_g(q / frame_interval)} frame intervals (written with too few digits): the steps "
+        f"take only the values {shown} s, multiples of {_g(q)} s, each within {_g(q)} s of a "
+        f"whole number of frame intervals ({int(np.count_nonzero(whole > 1))} dropped "
+        f"frame(s)). Pass timing_tolerance={_tolerance_for(q, frame_interval):g} (relative; a "
+        "manifest key too) and allow_irregular=True to keep them, or write the times with more "
+        "digits"
     )
 
 

@@ -4,7 +4,8 @@ Not part of the user-facing API (that is :mod:`blurtrap.data` and the top-level 
 names) and without a stability promise; it exists so that no other subpackage imports a
 private module of ``blurtrap.data`` (issue 16, clean boundaries). Each name is the data
 layer's own object, re-exported unchanged: the unit-slip thresholds of :class:`Recording`
-and its instrument metadata (also for calibrate_batch's rows), and the helpers that name the likely unit.
+and its instrument metadata (also for calibrate_batch's rows), and the helpers that name the likely unit, and the
+resolution of rounded time stamps (inference's irregular-time likelihood).
 """
 
 from ._instrument import _MAX_BEAD_RADIUS_M as MAX_BEAD_RADIUS_M
@@ -14,6 +15,7 @@ from ._plausible import _MIN_PLAUSIBLE_POSITION_STD_M as MIN_PLAUSIBLE_POSITION_
 from ._plausible import _check_temperature as check_temperature
 from ._plausible import _likely_unit as likely_position_unit
 from ._plausible import in_ms_message
+from ._timing import stamp_quantum
 
 __all__ = [
     "MAX_BEAD_RADIUS_M",
@@ -23,4 +25,5 @@ __all__ = [
     "check_temperature",
     "in_ms_message",
     "likely_position_unit",
+    "stamp_quantum",
 ]

@@ -121,9 +121,10 @@ def _timing_candidate(recs) -> Candidate:
     if irregular:
         j = irregular[0].timing_jitter
         ev = (f"time stamps irregular: jitter std {j.std * 1e6:.3g} us, max "
-              f"{j.max_deviation * 1e6:.3g} us ({len(irregular)} recordings); remedy: "
-              "calibrate fits the exact likelihood at the recorded frame times (closed-form "
-              "models; see the fit's notes)")
+              f"{j.max_deviation * 1e6:.3g} us ({len(irregular)} recordings); remedy: the "
+              "exact likelihood at the recorded frame times, which calibrate(data) fits by "
+              "default for the closed-form models (see its notes; this screen's base fit "
+              "treats the frames as regular)")
         return Candidate("timing_jitter", None, 0, 0.0, None, ev)
     return Candidate("timing_jitter", None, 0, 1.0, None, "time stamps regular")
 

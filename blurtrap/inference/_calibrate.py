@@ -17,7 +17,7 @@ import numpy as np
 from .._config import float64_scope
 from ._frames import _inspect_frames, temporal_information
 from ._instrument import finish_instrument, prepare_instrument
-from ._irregular import any_irregular
+from ._irregular import any_irregular, rounding_notes
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
 from ._options import _check_options, _flag
@@ -288,7 +288,7 @@ def _choose_likelihood(recs, mdl, likelihood, f_range, excluded, robust, notes):
     long. Raises for an explicit ``likelihood='exact'`` that the model or options exclude."""
     use = likelihood
     if any_irregular(recs):
-        return _irregular_choice(mdl, likelihood, f_range, excluded, robust, notes), False
+        return _irregular_choice(recs, mdl, likelihood, f_range, excluded, robust, notes), False
     if use == "auto":
         use = "whittle" if min(r.n_frames for r in recs) > 2**14 else "exact"
         if (f_range is not None or excluded or robust) and use == "exact":
@@ -319,7 +319,7 @@ def _choose_likelihood(recs, mdl, likelihood, f_range, excluded, robust, notes):
     return use, exact_ok
 
 
-def _irregular_choice(mdl, likelihood, f_range, excluded, robust, notes) -> str:
+def _irregular_choice(recs, mdl, likelihood, f_range, excluded, robust, notes) -> str:
     """Irregular time stamps: the exact likelihood at the recorded times where the model and
     options allow it (closed-form, aliased, every frequency); otherwise the Whittle fit on the
     nominal grid, with a note that the jitter is ignored (an explicit ``'exact'`` raises)."""
@@ -336,6 +336,7 @@ def _irregular_choice(mdl, likelihood, f_range, excluded, robust, notes) -> str:
                         if why else "; likelihood='exact' fits the recorded times") + ")")
         return "whittle"
     notes.append("likelihood: exact, at the recorded (irregular) frame times")
+    notes.extend(rounding_notes(mdl, recs))
     return "exact"
 
 

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._constants import BOLTZMANN
+from ..data.internal import stamp_quantum
 from ._likelihood import gls_loglik
 from ._models import TrapModel
 from ._problems import Layout, RecMeta, bucket_length, rec_meta
@@ -198,7 +199,8 @@ def any_irregular(recordings) -> bool:
 
 def check_irregular_model(model: TrapModel, recordings) -> None:
     """The state-space form covers the closed-form models (rectangular exposure, white
-    tracking noise); every interval must be at least the exposure (no overlapping frames)."""
+    tracking noise); every interval must be at least the exposure (no overlapping frames),
+    but for the rounding of the time stamps (:func:`rounding_shortfall`)."""
     if model.extra:
         raise ValueError(
             f"the irregular-time likelihood covers the closed-form models (naive, blur, "
@@ -210,10 +212,47 @@ def check_irregular_model(model: TrapModel, recordings) -> None:
             raise ValueError(f"recording {i}: time stamps must increase; the smallest interval "
                              f"is {float(d.min()):.3g} s")
         w = float(r.exposure) if model.blur else 0.0
-        if d.size and float(d.min()) < w * (1.0 - 1e-9):
+        if d.size and float(d.min()) < w * (1.0 - 1e-9) and rounding_shortfall(r, w) is None:
+            q = stamp_quantum(d)
+            why = (f"; the time stamps are rounded to {q * 1e6:.4g} us, more than 1 % of the "
+                   "exposure, too coarse to place the frames: write them with more digits"
+                   if q is not None else "")
             raise ValueError(
                 f"recording {i}: an interval between frames ({float(d.min()) * 1e3:.4g} ms) is "
-                f"shorter than the exposure W = {w * 1e3:.4g} ms; exposures cannot overlap")
+                f"shorter than the exposure W = {w * 1e3:.4g} ms; exposures cannot overlap"
+                + (why or " (check the exposure and the time stamps' unit)"))
+
+
+#: rounded time stamps may place frames closer than the exposure by up to their resolution;
+#: read as W when the resolution is at most this fraction of W
+_ROUNDING_MAX = 0.01
+
+
+def rounding_shortfall(rec, w: float) -> tuple[float, int] | None:
+    """``(q, count)`` when ``rec``'s intervals shorter than the exposure ``w`` are explained
+    by time stamps rounded to a resolution q <= 1 % of w (each short by at most q): ``count``
+    of them, read as ``w`` by the likelihood. ``(0.0, 0)`` when none is short; None when an
+    interval is shorter than rounding explains."""
+    d = frame_intervals(rec)[:-1]
+    short = d < w * (1.0 - 1e-9)
+    if not short.any():
+        return 0.0, 0
+    q = stamp_quantum(d)
+    if q is None or q > _ROUNDING_MAX * w or float(d.min()) < w - q * (1.0 + 1e-6):
+        return None
+    return q, int(short.sum())
+
+
+def rounding_notes(model: TrapModel, recordings) -> list[str]:
+    """A note per recording whose intervals shorter than the exposure were read as W."""
+    notes = []
+    for i, r in enumerate(recordings):
+        got = rounding_shortfall(r, float(r.exposure) if model.blur else 0.0)
+        if got is not None and got[1]:
+            notes.append(f"recording {i}: time stamps rounded to {got[0] * 1e6:.4g} us: {got[1]} "
+                         "interval(s) shorter than the exposure by at most that (exposures "
+                         "cannot overlap) were read as the exposure")
+    return notes
 
 
 def make_irregular_args(recordings, layout, model, mean="reml") -> IrregularArgs:
@@ -225,7 +264,9 @@ def make_irregular_args(recordings, layout, model, mean="reml") -> IrregularArgs
     for i, r in enumerate(recordings):
         y = np.asarray(r.positions, dtype=float)
         ys[i, : r.n_frames] = y if mean == "zero" else y - y.mean()
-        dts[i, : r.n_frames] = frame_intervals(r)
+        # rounded stamps (check_irregular_model): no interval shorter than the exposure
+        dts[i, : r.n_frames] = np.maximum(frame_intervals(r),
+                                           float(r.exposure) if model.blur else 0.0)
         dts[i, r.n_frames:] = float(r.frame_interval)
         mask[i, : r.n_frames] = 1.0
     return IrregularArgs(layout=layout, model=model, meta=rec_meta(recordings),

@@ -17,7 +17,8 @@ from ._fixed import expand as expand_fixed
 from ._fixed import held_consistency_note, reduced_objective
 from ._fixed import propagate as propagate_fixed
 from ._fixed import reduce as reduce_fixed
-from ._irregular import any_irregular, irregular_nll, make_irregular_args
+from ._innovations import innovation_gof
+from ._irregular import IrregularArgs, any_irregular, frame_intervals, irregular_nll, make_irregular_args
 from ._models import get_model
 from ._pooling import alone_estimates, disagreements, pooling_note
 from ._problems import exact_nll, make_exact_args, make_layout, spectral_nll
@@ -255,6 +256,13 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
     # goodness of fit on the periodogram against this fit's own spectrum
     psd = _psd_jit(out.value, sargs)
     gof = spectral_gof(sargs.power / psd, sargs.weight, len(layout.names))
+    extras = {"loglik": -float(out.nll), "f": unpadded(sargs, sargs.f),  # as Whittle's:
+              "ratio": unpadded(sargs, sargs.power / psd),  # data/model and its weights
+              "weight": unpadded(sargs, sargs.weight)}
+    if isinstance(args, IrregularArgs):  # the periodogram of irregular frames misfits
+        gof, ratios = innovation_gof(out.value, args, len(layout.names),
+                                     [float(np.mean(frame_intervals(r))) for r in recs])
+        extras.update(ratios)
     notes = [*notes, *_pooling_notes(recs, layout, model, sargs, psd,
                                      wout.nll if bool(wout.success) else None,
                                      gof["p_value"], fixed)]
@@ -264,9 +272,6 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
                                      gof["p_value"])
         if note:
             notes = [*notes, note]
-    extras = {"loglik": -float(out.nll), "f": unpadded(sargs, sargs.f),  # as Whittle's:
-              "ratio": unpadded(sargs, sargs.power / psd),  # data/model and its weights
-              "weight": unpadded(sargs, sargs.weight)}
     res = _assemble(recs, layout, model, "likelihood", out.value, out.cov, gof, notes, extras,
                     at_bound=out.at_bound, conditional=out.conditional,
                     interval_source=_interval_source(nll, args, s_out, out, held,
