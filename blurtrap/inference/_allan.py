@@ -26,6 +26,7 @@ from ..physics import (
     allan_variance_model,
     frame_moments,
 )
+from ._fit import at_lower_bound
 from ._problems import Layout, RecMeta
 
 
@@ -178,7 +179,13 @@ def _gls(a: AllanArgs, scale, x0):
     pd = jnp.all(evals > 1e-12 * jnp.max(evals)) & jnp.all(jnp.isfinite(evals))
     cov = jnp.linalg.inv(fisher) * scale[:, None] * scale[None, :]
     chi2 = jnp.sum(_whitened(u, (a, scale)) ** 2)
-    return scale * u, jnp.where(pd, cov, jnp.nan), chi2, sol.result == optx.RESULTS.successful, pd
+    # a parameter the log-space fit drove to 0 (eps^2 ~ 1e-26 m^2): the rule of the other
+    # fits on chi^2 / 2 (:func:`._fit.at_lower_bound`); its error is then NaN (_assemble),
+    # the others' the unconstrained ones (the information in natural units is regular at 0)
+    half = lambda x: 0.5 * jnp.sum(_residuals(x, (a, scale)) ** 2)
+    bound = at_lower_bound(jax.grad(half)(sol.value), jax.hessian(half)(sol.value))
+    return (scale * u, jnp.where(pd, cov, jnp.nan), chi2, sol.result == optx.RESULTS.successful,
+            pd, bound)
 
 
 def _covariances(recs, estimates, p, layout, blur, kmax):
@@ -199,7 +206,7 @@ def _covariances(recs, estimates, p, layout, blur, kmax):
 
 def fit_allan(recs, layout: Layout, meta: RecMeta, blur: bool, scale, n_iter: int = 3):
     """Iterated GLS fit of the Allan variances of `recs`. Returns ``(p, cov, chi2, dof, ok, pd,
-    estimates)``."""
+    estimates, at_bound)``."""
     estimates = [allan_variance(r) for r in recs]
     kmax = max(e.m.size for e in estimates)
     pad = lambda v, fill: np.stack([np.pad(np.asarray(x, float), (0, kmax - len(x)),
@@ -213,7 +220,7 @@ def fit_allan(recs, layout: Layout, meta: RecMeta, blur: bool, scale, n_iter: in
     for _ in range(n_iter):
         args = eqx.tree_at(lambda a: a.chol, args,
                            _covariances(recs, estimates, p, layout, blur, kmax))
-        p, cov, chi2, ok, pd = _gls(args, scale, x)
+        p, cov, chi2, ok, pd, bound = _gls(args, scale, x)
         x = jnp.log(p / scale)
     dof = sum(e.m.size for e in estimates) - len(layout.names)
-    return p, cov, chi2, dof, ok, pd, estimates
+    return p, cov, chi2, dof, ok, pd, estimates, bound

@@ -43,7 +43,7 @@ def _assemble(recs, layout, model, method, values, cov, gof, notes=(), extras=No
         cov[bound, :] = 0.0
         cov[:, bound] = 0.0
         cov[bound, bound] = np.nan  # (as the fit's own covariance: decoupled, NaN variance)
-        notes = tuple(notes) + (_bound_note(at_bounds, conditional),)
+        notes = tuple(notes) + (_bound_note(at_bounds, conditional, interval_source is not None),)
     temps = {float(r.temperature) for r in recs}
     temperature = float(np.mean(list(temps)))  # one value, or the mean of the recordings'
     change = _viscosity_change(min(temps), max(temps)) if len(temps) > 1 else 0.0
@@ -91,9 +91,10 @@ def _viscosity_change(lo: float, hi: float) -> float:
     return 100.0 * (1.0 - float(water_viscosity(hi)) / float(water_viscosity(lo)))
 
 
-def _bound_note(at_bounds, conditional) -> str:
+def _bound_note(at_bounds, conditional, profile=True) -> str:
     """The note of a fit with parameters at their lower bound 0 (``conditional``: the others'
-    errors could not be freed from the bound)."""
+    errors could not be freed from the bound; ``profile``: the result has profile
+    intervals)."""
     head = f"{', '.join(at_bounds)} at the lower bound 0: NaN error there"
     if conditional is not None and bool(np.any(conditional)):
         return (head + "; the other errors are CONDITIONAL on the bound (the full Fisher "
@@ -101,7 +102,9 @@ def _bound_note(at_bounds, conditional) -> str:
                 "small: use result.intervals (profile likelihood), which account for the bound")
     return (head + "; the other errors are the unconstrained Cramer-Rao bound at the estimate "
             "(the bound parameter counted as free: conservative near the bound); "
-            "result.intervals gives profile-likelihood intervals that account for the bound")
+            + ("result.intervals gives profile-likelihood intervals that account for the bound"
+               if profile else "result.intervals gives (0, 1.96 x its unconstrained error) "
+               "for it where the method has that error (no profile likelihood here)"))
 
 
 def _given_bound(out):

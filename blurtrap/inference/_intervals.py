@@ -4,6 +4,39 @@ from __future__ import annotations
 
 import math
 
+#: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
+Z95 = 1.959963984540054
+#: parameters that are positive by construction (their Wald interval is taken on log scale
+#: where it would reach below 0)
+_POSITIVE = ("k", "c", "gamma", "displacement_sensitivity", "force_sensitivity",
+             "hydro_radius", "f3db")
+
+
+def wald_intervals(names, values, errors, at_bounds, extras):
+    """``(intervals, kinds)`` from the estimates and their errors: Wald; log-Wald for a positive
+    parameter whose interval would reach below 0; eps^2's cut at 0; a parameter at its bound 0
+    ``(0, Z95 x unconstrained SE)`` where the fit gives that SE (``extras["bound_se"]``,
+    method 'allan'), else ``(0, NaN)`` (a profile, where there is one, replaces it)."""
+    ivs, kinds = {}, {}
+    for n, v, se in zip(names, values, errors, strict=True):
+        h = Z95 * float(se)
+        ivs[n], kinds[n] = (float(v - h), float(v + h)), "wald"
+        # a positive quantity whose Wald interval reaches below 0 (a large relative
+        # error): the same delta-method error on log scale, which stays positive
+        if n.split("[")[0] in _POSITIVE and v > 0 and v - h < 0:
+            ivs[n] = (float(v * math.exp(-h / v)), float(v * math.exp(h / v)))
+            kinds[n] = "log-wald"
+        elif n == "tracking_var" and v - h < 0 <= v:  # a variance: not below its bound
+            ivs[n], kinds[n] = (0.0, float(v + h)), "wald (cut at 0)"
+    bound_se = (extras or {}).get("bound_se") or {}
+    for n in at_bounds:
+        if n in ivs:
+            se = float(bound_se.get(n, math.nan))
+            ivs[n] = (0.0, Z95 * se if math.isfinite(se) else math.nan)
+            if math.isfinite(se):
+                kinds[n] = "wald (at the bound 0)"
+    return ivs, kinds
+
 
 def merge(ivs: dict, kinds: dict, more: dict, more_kinds: dict) -> None:
     """Put the intervals ``more`` (a profile's, ``(low, high)`` with NaN for an end whose

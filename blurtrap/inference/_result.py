@@ -10,14 +10,7 @@ import numpy as np
 
 from .._constants import BOLTZMANN
 from ..effects import QUANTITIES
-from ._intervals import merge
-
-#: two-sided 95 % normal quantile (Wald intervals: estimate +- Z95 SE)
-Z95 = 1.959963984540054
-#: parameters that are positive by construction (their Wald interval is taken on log scale
-#: where it would reach below 0)
-_POSITIVE = ("k", "c", "gamma", "displacement_sensitivity", "force_sensitivity",
-             "hydro_radius", "f3db")
+from ._intervals import merge, wald_intervals
 
 #: lab units (reports, plots, CLI): name -> (factor from SI, lab unit), from the one table
 #: of quantities in :mod:`blurtrap.effects`
@@ -170,27 +163,10 @@ class CalibrationResult:
             var = fc**2 * ((self.k_err / self.k) ** 2 + c[j, j] / g**2)
         return float(math.sqrt(var)) if var >= 0 else math.nan
 
-    def _wald_intervals(self):
-        half = Z95 * self.errors
-        ivs = {n: (float(v - h), float(v + h))
-               for n, v, h in zip(self.param_names, self.values, half, strict=True)}
-        kinds = {n: "wald" for n in ivs}
-        for n, v, h in zip(self.param_names, self.values, half, strict=True):
-            # a positive quantity whose Wald interval reaches below 0 (a large relative
-            # error): the same delta-method error on log scale, which stays positive
-            if n.split("[")[0] in _POSITIVE and v > 0 and v - h < 0:
-                ivs[n] = (float(v * math.exp(-h / v)), float(v * math.exp(h / v)))
-                kinds[n] = "log-wald"
-            elif n == "tracking_var" and v - h < 0 <= v:  # a variance: not below its bound
-                ivs[n], kinds[n] = (0.0, float(v + h)), "wald (cut at 0)"
-        for n in self.at_bounds:
-            if n in ivs:
-                ivs[n] = (0.0, math.nan)
-        return ivs, kinds
-
     def _interval_table(self):
         if self._interval_cache is None:
-            ivs, kinds = self._wald_intervals()
+            ivs, kinds = wald_intervals(self.param_names, self.values, self.errors,
+                                        self.at_bounds, self.extras)
             if self.interval_source is not None:
                 merge(ivs, kinds, *self.interval_source(self))
             object.__setattr__(self, "_interval_cache", (ivs, kinds))
@@ -212,7 +188,9 @@ class CalibrationResult:
         converge)"`` (or ``"log-wald (...)"``) where a profile was wanted but one of its fits
         failed (k of a record ~10 relaxation times long), ``"profile (upper end wald: its
         profile did not converge)"`` where one end converged and is kept; ``"wald (cut at
-        0)"``: eps^2 (a variance) whose Wald interval would reach below 0, no profile."""
+        0)"``: eps^2 (a variance) whose Wald interval would reach below 0, no profile; ``"wald
+        (at the bound 0)"``: a parameter at its bound 0 without a profile (method 'allan'):
+        ``(0, 1.96 x its unconstrained SE)``."""
         return dict(self._interval_table()[1])
 
     @property

@@ -163,7 +163,8 @@ def _fit_allan(recs, layout, model, notes):
         raise ValueError("method 'allan' fits the closed-form frame model (naive, blur or "
                          f"standard); got model {model.name!r}")
     scale = _start_vector(recs, layout, model.noise)
-    p, cov, chi2, dof, ok, pd, est = fit_allan(recs, layout, rec_meta(recs), model.blur, scale)
+    p, cov, chi2, dof, ok, pd, est, bound = fit_allan(recs, layout, rec_meta(recs), model.blur,
+                                                      scale)
     if not bool(ok):
         raise FitError(f"allan: the fit did not converge; parameters {layout.names}")
     if not bool(pd):
@@ -173,8 +174,12 @@ def _fit_allan(recs, layout, model, notes):
            "dof": dof, "p_value": float(chi2_sf(float(chi2), dof)) if dof > 0 else float("nan")}
     notes = list(notes) + [f"allan: overlapping Allan variance at {len(e.m)} octave cluster "
                            f"sizes (1..{int(e.m[-1])} frames) of {e.n_frames} frames" for e in est]
+    # the information is regular at eps^2 = 0: the unconstrained SE of a bound parameter
+    # gives its interval (0, 1.96 SE) (_assemble makes its error NaN, as every fit's)
+    bound_se = {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(layout.names) if bound[i]}
     return _assemble(recs, layout, model, "allan", p, cov, gof, notes,
-                     extras={"allan": [e.to_dict() for e in est]})
+                     extras={"allan": [e.to_dict() for e in est], "bound_se": bound_se},
+                     at_bound=bound)
 
 
 def _equipartition(recs, diffusion, pade, tracking=None):

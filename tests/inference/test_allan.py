@@ -154,3 +154,24 @@ def test_calibrate_allan_recovers_truth_and_quotes_errors():
     like = bt.calibrate(rec)
     # the Allan variance is a lossy summary: its errors cannot beat the likelihood's
     assert res.k_err > 0.9 * like.k_err and res.gamma_err > 0.9 * like.gamma_err
+
+
+def test_allan_flags_eps2_driven_to_its_bound():
+    """Frames without tracking noise (circulant embedding, not blurtrap's simulator): the
+    log-space GLS drives eps^2 to ~1e-26 m^2. That is the bound 0, flagged as by the other
+    fits (NaN error, a note), with the interval (0, 1.96 x the unconstrained SE): a finite
+    'error' at 1e-26 had been reported as if eps^2 were estimated there."""
+    from _circulant import circulant_frames
+
+    dt = 1 / 1500
+    y = circulant_frames(2e-5, 1e-8, dt, dt, 0.0, 32768, 1, temperature=295.0)
+    res = bt.calibrate(bt.Recording(y, frame_interval=dt, exposure=dt, temperature=295.0),
+                       method="allan")
+    assert res.tracking_var < 1e-22  # the case: driven to 0 (3e-18 is one SE here)
+    assert res.at_bounds == ("tracking_var",)
+    assert math.isnan(res.tracking_var_err)
+    assert any("lower bound 0" in n and "no profile" in n for n in res.notes)
+    low, high = res.intervals["tracking_var"]
+    assert low == 0.0 and 1e-18 < high < 2e-17
+    assert res.interval_kinds["tracking_var"] == "wald (at the bound 0)"
+    assert math.isfinite(res.k_err) and math.isfinite(res.gamma_err)
