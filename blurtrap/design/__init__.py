@@ -2,6 +2,7 @@
 
 from ._bounds import bound_probability as bound_probability
 from ._bounds import bounded_covariance as bounded_covariance
+from ._checks import NotIdentifiedError as NotIdentifiedError
 from ._design import Acquisition as Acquisition
 from ._design import DesignResult as DesignResult
 from ._design import design as design

@@ -51,6 +51,46 @@ def _checked_friction(target, friction_error) -> float:
     return -1.0 if friction_error is None else float(friction_error)
 
 
+class NotIdentifiedError(ValueError):
+    """No candidate design identifies what the fit must identify (`what`: ``"k"`` or ``"both
+    k and gamma"``; `friction_fitted`: the friction is fitted, not known from the bead)."""
+
+    def __init__(self, message: str, what: str, friction_fitted: bool):
+        super().__init__(message)
+        self.what = what
+        self.friction_fitted = friction_fitted
+
+
+def distinct(a: float, b: float) -> tuple[str, str]:
+    """`a` and `b` formatted with 3 significant digits, or as many more as tell them apart."""
+    for digits in (3, 6, 9):
+        if f"{a:.{digits}g}" != f"{b:.{digits}g}":
+            break
+    return f"{a:.{digits}g}", f"{b:.{digits}g}"
+
+
+def check_timing(max_fps: float, min_exposure: float, dead_time: float) -> None:
+    """Room for an exposure in the frame interval at the fastest frame rate: min_exposure
+    shorter than 1/max_fps, and 0 <= dead_time < 1/max_fps - min_exposure (each named with
+    its value, never as a range whose upper end is negative)."""
+    dt_min = 1.0 / max_fps
+    if not min_exposure < dt_min:
+        w, dt = distinct(min_exposure, dt_min)
+        longer = min_exposure > dt_min
+        raise ValueError(f"min_exposure = {w} s is {'longer than' if longer else 'as long as'} the frame "
+                         f"interval at max_fps = {max_fps:g} Hz (1/max_fps = {dt} s): "
+                         + ("an exposure cannot be longer than the frame interval" if longer else
+                            "design needs exposures shorter than the frame interval")
+                         + "; lower min_exposure or max_fps")
+    if not dead_time >= 0:
+        raise ValueError(f"dead_time must be >= 0 s; got dead_time = {dead_time!r}")
+    if not dead_time < dt_min - min_exposure:
+        raise ValueError(f"dead_time = {dead_time:g} s leaves no time for an exposure: the frame interval "
+                         f"at max_fps = {max_fps:g} Hz is {dt_min:.3g} s and the shortest exposure "
+                         f"min_exposure = {min_exposure:g} s, so dead_time must be below 1/max_fps - "
+                         f"min_exposure = {dt_min - min_exposure:.3g} s")
+
+
 def _checked_noise(tracking_std, photon_limited) -> float:
     """eps_ref^2 [m^2] from the tracking-error rms, checked."""
     if tracking_std < 0 or not np.isfinite(tracking_std):

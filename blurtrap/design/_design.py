@@ -26,7 +26,16 @@ from .._config import float64_scope
 from ..physics import BOLTZMANN
 from ._bounds import bound_probability, bounded_covariance
 from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
-from ._checks import _check, _checked_friction, _checked_noise, check_units_of, checked_current, checked_trap
+from ._checks import (
+    NotIdentifiedError,
+    _check,
+    _checked_friction,
+    _checked_noise,
+    check_timing,
+    check_units_of,
+    checked_current,
+    checked_trap,
+)
 from ._fisher import K_PAD, _informations, candidate_informations, padded
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
@@ -324,9 +333,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     if check_units:
         check_units_of(tracking_std, max_fps, w_min, reference_exposure)
     cur = None if current is None else checked_current(current, check_units)
-    if not (0.0 <= dead_time < dt_min - w_min):
-        raise ValueError(f"dead_time must be in [0, 1/max_fps - min_exposure) = [0, "
-                         f"{dt_min - w_min:.3g}) s; got dead_time = {dead_time!r}")
+    check_timing(max_fps, w_min, dead_time)
     eps_ref2 = _checked_noise(tracking_std, photon_limited)
     w_ref = float(reference_exposure) if reference_exposure is not None else dt_min
     common = (ks, gamma, temperature, eps_ref2, w_ref, bool(photon_limited), target, friction_se)
@@ -356,11 +363,12 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     cands.sort(key=lambda c: c.objective)  # unidentified designs (objective inf) last
     if not math.isfinite(cands[0].objective):
         what = "both k and gamma" if friction_se < 0 or target == "force_sensitivity" else "k"
-        raise ValueError(f"no candidate design identifies {what} under these constraints "
-                         "(dt >> tau at the fastest frame rate?): allow a faster frame rate or "
-                         "shorter exposures" + (", or give the friction from the bead size "
-                                                "(friction_error=...) and calibrate k with it"
-                                                if friction_se < 0 else ""))
+        raise NotIdentifiedError(f"no candidate design identifies {what} under these constraints "
+                                 "(dt >> tau at the fastest frame rate?): allow a faster frame rate or "
+                                 "shorter exposures" + (", or give the friction from the bead size "
+                                                        "(friction_error=...) and calibrate k with it"
+                                                        if friction_se < 0 else ""),
+                                 what=what, friction_fitted=friction_se < 0)
     settings = {"gamma_N_s_per_m": gamma, "temperature_K": temperature, "max_fps_Hz": max_fps,
                 "min_exposure_s": w_min, "dead_time_s": dead_time, "n_frames": n_frames,
                 "total_time_s": total_time, "tracking_std_m": tracking_std,

@@ -61,3 +61,21 @@ def test_slow_frame_rate_is_accepted_with_a_warning_naming_khz():
         res = bt.design(k=5e-5, radius=1.53e-6, max_fps=1.5, total_time=600, series=(), target="k",
                         friction_error=0.05)
     assert res.best.recordings[0][0] == pytest.approx(1 / 1.5)
+
+
+@pytest.mark.parametrize("kw, pattern", [
+    (dict(min_exposure=2e-3), r"min_exposure = 0\.002 s is longer than the frame interval at max_fps = 1500 Hz "
+                              r"\(1/max_fps = 0\.000667 s\): an exposure cannot be longer than the frame "
+                              r"interval; lower min_exposure or max_fps"),
+    (dict(min_exposure=5e-4, max_fps=2000), r"min_exposure = 0\.0005 s is as long as the frame interval at "
+                                            r"max_fps = 2000 Hz"),
+    (dict(dead_time=1e-3), r"dead_time = 0\.001 s leaves no time for an exposure: .*dead_time must be below "
+                           r"1/max_fps - min_exposure = 0\.000666 s"),
+    (dict(dead_time=-1e-3), r"dead_time must be >= 0 s; got dead_time = -0\.001"),
+])
+def test_exposure_longer_than_the_frame_interval_is_named(kw, pattern):
+    """No range with a negative end ("[0, -0.00133)"): the exposure that does not fit in the
+    frame interval, or the dead time that leaves no exposure, is named."""
+    with pytest.raises(ValueError, match=pattern) as err:
+        design(**kw)
+    assert "[0, -" not in str(err.value)
