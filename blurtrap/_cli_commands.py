@@ -8,6 +8,7 @@ import math
 import sys
 from typing import Any
 
+from ._cli_checks import check_bands, check_design, check_simulate, check_simulated_spread, not_identified_message
 from .cli import CliError, dumps_json
 
 
@@ -34,6 +35,7 @@ def calibrate_command(args) -> int:
 
     path = Path(args.manifest)
     _check_input_path(path)
+    check_bands(args)
     xy = holds_xy(path)
     if xy:
         _refuse_for_xy(args)
@@ -212,20 +214,11 @@ def simulate_command(args) -> int:
 
     from .data import Recording, RecordingSet, save_manifest
 
-    if args.frames < 16:
-        raise CliError(f"--frames must be >= 16; got {args.frames}")
-    if args.fps <= 0:
-        raise CliError(f"--fps must be > 0 Hz; got {args.fps:g}")
+    check_simulate(args)  # in the flags' units, before anything is simulated
     ks = [k * 1e-3 for k in args.k]
-    if any(not (k > 0) for k in ks):
-        raise CliError(f"--k must be > 0 pN/nm; got {args.k}")
     if args.gamma is not None:
         gamma = args.gamma * 1e-6
-        if not gamma > 0:
-            raise CliError(f"--gamma must be > 0 pN s/um; got {args.gamma:g}")
     else:
-        if not args.radius > 0:
-            raise CliError(f"--radius must be > 0 um; got {args.radius:g}")
         gamma = 6 * math.pi * args.viscosity * args.radius * 1e-6
     dt = 1.0 / args.fps
     ws = [w * 1e-3 for w in args.exposure_ms]
@@ -255,6 +248,7 @@ def simulate_command(args) -> int:
     recs = []
     for i, k in enumerate(ks):
         for j, w in enumerate(w_arr):
+            check_simulated_spread(x[i, j, 0], args.k[i], float(w) * 1e3, gamma * 1e6, args)
             recs.append(Recording(
                 x[i, j, 0], frame_interval=dt, exposure=float(w), temperature=args.temperature,
                 laser_power=None if powers is None else powers[i],
@@ -281,22 +275,29 @@ def simulate_command(args) -> int:
 
 def design_command(args) -> int:
     """``blurtrap design``: the recommended acquisition, printed (and plotted)."""
-    from .design import design
+    import warnings
 
-    if len(args.k) not in (1, 2):
-        raise CliError(f"--k takes one stiffness or a range K_MIN K_MAX [pN/nm]; got {args.k}")
+    from .design import NotIdentifiedError, design
+
+    for text in check_design(args):  # in the flags' units, before any design is computed
+        print(f"blurtrap design: warning: {text}", file=sys.stderr)
     k = tuple(v * 1e-3 for v in args.k)
-    res = design(k=k[0] if len(k) == 1 else k,
-                 gamma=None if args.gamma is None else args.gamma * 1e-6,
-                 radius=None if args.radius_um is None else args.radius_um * 1e-6,
-                 viscosity=args.viscosity, temperature=args.temperature,
-                 max_fps=args.max_fps, min_exposure=args.min_exposure_ms * 1e-3,
-                 dead_time=args.dead_time_ms * 1e-3, n_frames=args.frames,
-                 total_time=args.total_s, tracking_std=args.tracking_nm * 1e-9,
-                 photon_limited=args.photon_limited, target=args.target,
-                 friction_error=(None if args.friction_error is None
-                                 else args.friction_error / 100.0),
-                 series=tuple(args.series), laser_powers=args.powers)
+    with warnings.catch_warnings():  # design's own (Python-worded) warning of --max-fps, said above
+        warnings.filterwarnings("ignore", message=r"max_fps = .* is below", category=UserWarning)
+        try:
+            res = design(k=k[0] if len(k) == 1 else k,
+                         gamma=None if args.gamma is None else args.gamma * 1e-6,
+                         radius=None if args.radius_um is None else args.radius_um * 1e-6,
+                         viscosity=args.viscosity, temperature=args.temperature,
+                         max_fps=args.max_fps, min_exposure=args.min_exposure_ms * 1e-3,
+                         dead_time=args.dead_time_ms * 1e-3, n_frames=args.frames,
+                         total_time=args.total_s, tracking_std=args.tracking_nm * 1e-9,
+                         photon_limited=args.photon_limited, target=args.target,
+                         friction_error=(None if args.friction_error is None
+                                         else args.friction_error / 100.0),
+                         series=tuple(args.series), laser_powers=args.powers)
+        except NotIdentifiedError as exc:
+            raise CliError(not_identified_message(exc, args)) from exc
     if args.plot:
         import matplotlib
 

@@ -259,7 +259,7 @@ CLI_BAD_INPUTS = [
     (["calibrate", "{tmp}/sim/manifest.json", "--exclude", "0", "750"],
      "excluded ranges .* leave 0 of the"),
     (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "2000", "3000"], "Nyquist"),
-    (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "100", "10"], "f_range"),
+    (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "100", "10"], "--f-range FMIN FMAX needs"),
     (["calibrate", "{tmp}/sim/manifest.json", "--method", "equipartition", "--diffusion", "3e5"],
      "um\\^2/s"),
     (["calibrate", "{tmp}/sim/manifest.json", "--method", "psd", "--diffusion", "0.3"],
