@@ -13,6 +13,7 @@ is the single table of units and ranges that results, reports, plots and priors 
 from __future__ import annotations
 
 import importlib
+import math
 import pkgutil
 
 from . import injections as injections
@@ -115,8 +116,25 @@ def lab_units(name: str) -> tuple[float, str]:
     return (q.lab_factor, q.lab_unit) if q is not None else (1.0, "SI")
 
 
+#: the fitted quantities whose plausible ranges reveal positions in another unit than
+#: declared (k, c and gamma scale as 1/s^2 when the positions are s x too large)
+UNIT_SLIP_QUANTITIES = ("k", "c", "gamma")
+
+
+def implausible(name: str, value: float) -> Param | None:
+    """The quantity of ``name`` (per-recording names use their base name) when the finite,
+    positive ``value`` (SI) lies outside its plausible range (``Param.bounds``: the range of
+    a trapped bead in a liquid, the default prior's support), else None. Results, batch rows,
+    held values and priors all ask this one question (a unit slip, almost always)."""
+    q = QUANTITIES.get(name.split("[")[0])
+    if q is None or not (math.isfinite(value) and value > 0) or not q.outside(value):
+        return None
+    return q
+
+
 __all__ = [
-    "EFFECTS", "QUANTITIES", "AbstractEffect", "Aliasing", "Anharmonicity", "DataContext",
+    "EFFECTS", "QUANTITIES", "UNIT_SLIP_QUANTITIES", "AbstractEffect", "Aliasing", "Anharmonicity",
+    "DataContext", "implausible",
     "DetectorFilter", "Drift", "ExposureKernel", "Hydrodynamics", "LaserHeating", "LineNoise",
     "MotionBlur", "Param", "PowerOffset", "StageDrive", "StartContext", "TimingJitter",
     "TrackingNoise", "discover", "injections", "lab_units", "make_effect", "value_field",

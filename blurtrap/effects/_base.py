@@ -86,6 +86,21 @@ class Param:
     start: Callable[[StartContext], float] | None = dataclasses.field(default=None,
                                                                        compare=False)
 
+    def outside(self, value: float) -> bool:
+        """Whether ``value`` (SI) lies outside the plausible range ``bounds`` (False without
+        bounds; NaN is outside)."""
+        return self.bounds is not None and not self.bounds[0] <= value <= self.bounds[1]
+
+    def range_text(self, lab: bool = True) -> str:
+        """The plausible range as text, ``"1e-10..1 N/m (1e-07..1000 pN/nm)"`` (SI only
+        without ``lab``)."""
+        if self.bounds is None:
+            return "any"
+        lo, hi = self.bounds
+        si = f"{lo:g}..{hi:g} {self.unit}"
+        return si + (f" ({lo * self.lab_factor:g}..{hi * self.lab_factor:g} {self.lab_unit})"
+                     if lab else "")
+
 
 @dataclasses.dataclass(frozen=True)
 class DataContext:

@@ -134,14 +134,10 @@ def implausible_status(k: float, gamma: float) -> str:
     """calibrate's plausibility note per item: a k or gamma outside any trapped bead's range
     (``Param.bounds``) is almost always a position unit slip (an independent pass: positions
     in mm gave status "ok" with k 1e-6 x the truth). ``""`` when both are in range."""
-    from ..effects import QUANTITIES
+    from ..effects import implausible
 
-    bad = []
-    for name, v in (("k", k), ("gamma", gamma)):
-        q = QUANTITIES[name]
-        assert q.bounds is not None
-        if math.isfinite(v) and v > 0 and not q.bounds[0] <= v <= q.bounds[1]:
-            bad.append(f"{name} = {v:.3g} {q.unit}, expected {q.bounds[0]:g}..{q.bounds[1]:g}")
+    bad = [f"{n} = {v:.3g} {q.unit}, expected {q.range_text(lab=False)}"
+           for n, v in (("k", k), ("gamma", gamma)) if (q := implausible(n, v)) is not None]
     return ("implausible: " + "; ".join(bad) + " (a trapped bead lies within these ranges): "
             "check the position unit") if bad else ""
 

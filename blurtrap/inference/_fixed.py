@@ -17,6 +17,7 @@ bias is second order).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from typing import Any
@@ -195,17 +196,13 @@ def check_plausible(held: dict, volts: bool = False) -> None:
         q = QUANTITIES.get(base)
         if q is None or q.bounds is None or (volts and base in _VOLT_SCALED):
             continue
-        lo, hi = q.bounds
         tiny = base == "tracking_var" and 0.0 < value < MIN_NONZERO_TRACKING_VAR
-        if lo <= value <= hi and not tiny:
+        if not q.outside(value) and not tiny:
             continue
+        rng = q.range_text()
         if tiny:
-            rng = (f"0 (negligible tracking error) or {MIN_NONZERO_TRACKING_VAR:g}..{hi:g} "
-                   f"{q.unit} ({MIN_NONZERO_TRACKING_VAR * q.lab_factor:g}..{hi * q.lab_factor:g}"
-                   f" {q.lab_unit})")
-        else:
-            rng = (f"{lo:g}..{hi:g} {q.unit} ({lo * q.lab_factor:g}..{hi * q.lab_factor:g} "
-                   f"{q.lab_unit})")
+            rng = "0 (negligible tracking error) or " + dataclasses.replace(
+                q, bounds=(MIN_NONZERO_TRACKING_VAR, q.bounds[1])).range_text()
         raise ValueError(
             f"fixed[{name!r}] = {value:g} {q.unit} ({value * q.lab_factor:g} {q.lab_unit}) is "
             f"outside the plausible range of the {q.description}, {rng}: this looks like a "

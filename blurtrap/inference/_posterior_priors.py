@@ -93,13 +93,13 @@ def check_prior_units(names, priors, volts=False) -> None:
     the likely unit slip (lab units instead of SI): the posterior of such a prior is the
     flat-prior one, silently (an independent pass: Normal(0.0268, 5e-4) for gamma in
     pN s/um, a 2 % prior, changed nothing). Not for positions in volts."""
-    from ..effects import QUANTITIES
+    from ..effects import QUANTITIES, UNIT_SLIP_QUANTITIES
 
     for name, prior in zip(names, priors):
         base = _base(name)
         q = QUANTITIES.get(base)
         rng = _prior_range(prior)
-        if volts or base not in ("k", "c", "gamma") or q is None or q.bounds is None \
+        if volts or base not in UNIT_SLIP_QUANTITIES or q is None or q.bounds is None \
                 or rng is None:
             continue
         lo, hi = q.bounds
@@ -107,9 +107,8 @@ def check_prior_units(names, priors, volts=False) -> None:
             continue
         raise ValueError(
             f"priors[{base!r}] = {type(prior).__name__}(...) puts its mass at {rng[0]:.3g}..{rng[1]:.3g} "
-            f"{q.unit}, outside the plausible range of the {q.description}, {lo:g}..{hi:g} "
-            f"{q.unit} ({lo * q.lab_factor:g}..{hi * q.lab_factor:g} {q.lab_unit}): this looks "
-            f"like a unit slip; priors take SI ({q.unit}; 1 {q.lab_unit} = "
+            f"{q.unit}, outside the plausible range of the {q.description}, {q.range_text()}: "
+            f"this looks like a unit slip; priors take SI ({q.unit}; 1 {q.lab_unit} = "
             f"{1 / q.lab_factor:g} {q.unit})")
 
 

@@ -162,26 +162,21 @@ def _plausibility_notes(recs, res, stage=False) -> list:
     large, so the note names the unit that brings them into range (positions in metres);
     ``stage``: positions in volts scaled by a stage drive (Rd), whose stage positions (in
     metres) then carry the slip: the note names the factor."""
-    from ..effects import QUANTITIES
+    from ..effects import UNIT_SLIP_QUANTITIES, implausible
 
-    bad = []
-    for name, v in zip(res.param_names, np.asarray(res.values, dtype=float)):
-        q = QUANTITIES.get(name.split("[")[0])
-        if name.split("[")[0] not in ("k", "c", "gamma") or q is None or q.bounds is None:
-            continue
-        if math.isfinite(v) and v > 0 and not q.bounds[0] <= v <= q.bounds[1]:
-            bad.append((name, v, q))
+    bad = [(n, v, q) for n, v in zip(res.param_names, np.asarray(res.values, dtype=float))
+           if n.split("[")[0] in UNIT_SLIP_QUANTITIES and (q := implausible(n, v)) is not None]
     if not bad:
         return []
     shown = "; ".join(f"{n} = {v:.3g} {q.unit} ({v * q.lab_factor:.3g} {q.lab_unit}), "
-                      f"expected {q.bounds[0]:g}..{q.bounds[1]:g} {q.unit}" for n, v, q in bad)
+                      f"expected {q.range_text(lab=False)}" for n, v, q in bad)
     meta = getattr(recs[0], "metadata", None) or {}
     declared = "m" if stage else (str(meta.get("position_unit", "m")) if hasattr(meta, "get")
                                   else "m")
     hint = ""
     if stage:
         fits = [s for s in (1e-9, 1e-6, 1e-3, 1e3, 1e6, 1e9)
-                if all(q.bounds[0] <= v / s ** 2 <= q.bounds[1] for _, v, q in bad)]
+                if not any(q.outside(v / s**2) for _, v, q in bad)]
         if fits:
             hint = (f"; with the stage positions {fits[0]:g} x what was given they would be "
                     "in range: check the stage's unit (Recording(stage=...) is in metres; "
@@ -192,9 +187,9 @@ def _plausibility_notes(recs, res, stage=False) -> list:
         best = None
         for unit, metres in _UNIT_METRES.items():
             s = metres / _UNIT_METRES[declared]  # positions were s x what was declared
-            ok = all(q.bounds[0] <= v / s**2 <= q.bounds[1] for _, v, q in bad)
+            ok = not any(q.outside(v / s**2) for _, v, q in bad)
             # the likeliest: closest to the middle (log scale) of the plausible ranges
-            dist = sum(abs(math.log(v / s**2 / math.sqrt(q.bounds[0] * q.bounds[1])))
+            dist = sum(abs(math.log(v / s**2 / math.sqrt(math.prod(q.bounds or (1.0, 1.0)))))
                        for _, v, q in bad)
             if unit != declared and ok and (best is None or dist < best[1]):
                 best = (unit, dist)
