@@ -14,14 +14,17 @@ from .cli import CliError
 from .data.internal import (
     MAX_BEAD_RADIUS_M,
     MAX_PLAUSIBLE_INTERVAL_S,
+    MAX_PLAUSIBLE_LASER_POWER_W,
     MAX_PLAUSIBLE_POSITION_STD_M,
+    MAX_PLAUSIBLE_TEMPERATURE_K,
     MIN_PLAUSIBLE_POSITION_STD_M,
+    MIN_PLAUSIBLE_TEMPERATURE_K,
 )
 
 #: the temperatures [K] and the largest laser power [mW] blurtrap.Recording accepts with its
-#: unit checks (blurtrap.data's limits; tests/test_cli_messages.py keeps them equal)
-TEMPERATURE_K = (100.0, 400.0)
-MAX_POWER_MW = 1e4
+#: unit checks (blurtrap.data's own limits)
+TEMPERATURE_K = (MIN_PLAUSIBLE_TEMPERATURE_K, MAX_PLAUSIBLE_TEMPERATURE_K)
+MAX_POWER_MW = MAX_PLAUSIBLE_LASER_POWER_W * 1e3
 #: bead radii [um]: from 1 nm up to the data layer's largest bead (1 mm, excluded)
 RADIUS_UM = (1e-3, MAX_BEAD_RADIUS_M * 1e6)
 MIN_FPS = 1.0 / MAX_PLAUSIBLE_INTERVAL_S  # slower: frame intervals the loaders read as ms

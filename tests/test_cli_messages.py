@@ -154,13 +154,3 @@ def test_calibrate_reversed_bands_name_the_flag(tmp_path, capsys, monkeypatch, a
     assert main(["calibrate", str(manifest), "--method", "psd", *argv]) == 1
     line = _error_line(capsys.readouterr().err, "calibrate")
     assert re.search(pattern, line), line
-
-
-def test_limits_are_the_data_layers():
-    """The command line refuses what blurtrap.Recording would refuse, no less and no more."""
-    from blurtrap import _cli_checks
-    from blurtrap.data import _plausible
-
-    assert _cli_checks.TEMPERATURE_K == (_plausible._MIN_PLAUSIBLE_TEMPERATURE_K,
-                                         _plausible._MAX_PLAUSIBLE_TEMPERATURE_K)
-    assert _cli_checks.MAX_POWER_MW == _plausible._MAX_PLAUSIBLE_LASER_POWER_W * 1e3
