@@ -11,6 +11,7 @@ import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from _instrument_gen import generate
 
@@ -228,3 +229,27 @@ def test_console_script_reports_the_sensitivities(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "displacement_sensitivity" in run.stdout and "nm/V" in run.stdout
     assert "force_sensitivity" in run.stdout and "pN/V" in run.stdout
+
+
+@pytest.mark.parametrize("k_mode", ["per_power", "linear_power"])
+def test_force_sensitivity_of_recordings_at_several_powers(k_mode):
+    """Volts at three laser powers with the bead's friction: Rf = k Rd is a force per volt of
+    one recording (recording 0's, said in the note with every recording's). With k = c P it
+    was c Rd (N/V/W), 1/P0 = 10 x recording 0's Rf, reported in pN/V."""
+    rd = 80e-9
+    recs = []
+    for i, (k, p) in enumerate([(2e-5, 0.1), (4e-5, 0.2), (6e-5, 0.3)]):
+        x, _ = generate(k, GAMMA, 1 / FS_PD, None, 2**15, 30 + i, temperature=T,
+                        anti_aliasing=True, oversample=8, volts_per_m=1 / rd)
+        recs.append(bt.Recording(x[0], frame_interval=1 / FS_PD, exposure=1 / FS_PD,
+                                 temperature=T, position_unit="V", laser_power=p,
+                                 metadata={"detector": "photodiode", "anti_aliasing": True,
+                                           "friction": "stokes", **_bead()}))
+    res = bt.calibrate(recs, k=k_mode)
+    i = res.param_names.index("force_sensitivity")
+    assert abs(res.values[i] - 2e-5 * rd) < 3.5 * res.errors[i]
+    note = next(n for n in res.notes if "force sensitivity" in n)
+    assert "recording 0's k" in note
+    each = [float(v) for v in note.split("Rf_i = k_i Rd = ")[1].split(" pN/V")[0].split(", ")]
+    rd_fit = res.values[res.param_names.index("displacement_sensitivity")]
+    np.testing.assert_allclose(each, np.asarray(res.k_per_recording) * rd_fit * 1e12, rtol=1e-3)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._config import float64_scope
 from ._frames import _inspect_frames, temporal_information
-from ._instrument import finish_instrument, prepare_instrument
+from ._instrument import prepare_instrument
 from ._irregular import any_irregular, rounding_notes
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
@@ -27,6 +27,7 @@ from ._refusals import _check_psd_blocks, _no_temporal_information_message, know
 from ._result import CalibrationResult, FitError
 from ._starts import moment_start
 from ._variance_methods import _equipartition, _fit_allan, _fit_variance
+from ._volts import finish_instrument
 
 METHODS = ("auto", "likelihood", "psd", "variance_vs_exposure", "variance_vs_power",
            "equipartition", "allan")

@@ -10,12 +10,12 @@ from ._fit import chi2_sf
 from ._fit_inputs import html_table
 from ._frames import _inspect_frames as inspect_frames
 from ._frames import mean_shift
-from ._instrument import _power_of as volts_power
 from ._instrument import default_model
 from ._ml_fits import screen_model
 from ._recordings import as_recordings
 from ._refusals import refuse_without_temporal_information
 from ._spectral import _np_periodogram as np_periodogram
+from ._volts import _power_of as volts_power
 
 __all__ = [
     "as_recordings",
