@@ -132,13 +132,55 @@ def physics_notes(recs, radii, res, plan) -> list:
     found k = 112 N/m and gamma 1e6 x Stokes with no note); not for volts through a known
     friction (gamma is the friction given). A friction given beside a drive is not used:
     the note says so and compares it with the fitted gamma."""
+    exposure = exposure_notes(res, plan)
     if plan.volts and plan.drive is None:
-        return []
+        return exposure
     if plan.volts and plan.gamma_known is not None:
         out = [_drive_friction_note(res, plan.gamma_known)]
     else:
         out = _stokes_notes(recs, radii, res)
-    return out + _plausibility_notes(recs, res, stage=plan.volts)
+    return out + _plausibility_notes(recs, res, stage=plan.volts) + exposure
+
+
+def _blur_b(a: float) -> float:
+    """B(a) = 2 (cosh a - 1) / a^2 (paper eq. 8), stable at small a."""
+    return 1.0 + a * a / 12.0 if a < 1e-4 else 2.0 * (math.cosh(a) - 1.0) / (a * a)
+
+
+#: the exposure note appears when a declared exposure 10 % off would move k by more than
+#: this many of its standard errors
+_EXPOSURE_SE = 0.5
+
+
+def exposure_notes(res, plan) -> list:
+    """A note when k and gamma rest on the declared exposure more than their errors say.
+
+    With the exposure W and the tracking noise eps^2 both in the model, the frames cannot
+    tell W from eps^2: their autocovariance is ``C(0) = kT/k S(a) + eps^2``, ``C(m) = kT/k
+    B(a) rho^m`` (``a = W/tau``), so the data fix ``rho`` (hence tau) and ``kT/k B(a)``, and
+    any declared W gives the same likelihood with ``k, gamma ~ B(W/tau)`` and eps^2 taking
+    the rest. One exposure for every recording, eps^2 not held: when W 10 % longer would
+    move k by more than :data:`_EXPOSURE_SE` of its SE, the note says by how much."""
+    mdl = plan.model
+    names = list(res.param_names)
+    w = {float(r.exposure) for r in plan.recordings}
+    if not (mdl.blur and mdl.noise) or len(w) != 1 or "tracking_var" in (plan.fixed or {}) \
+            or "gamma" not in names:
+        return []
+    w0 = w.pop()
+    k, k_err, tau = float(res.k), float(res.k_err), float(res.gamma) / float(res.k)
+    if not (w0 > 0 and tau > 0 and math.isfinite(k_err) and k_err > 0):
+        return []
+    a = w0 / tau
+    shift = _blur_b(1.1 * a) / _blur_b(a) - 1.0
+    if shift * k < _EXPOSURE_SE * k_err:
+        return []
+    return [f"k and gamma rest on the declared exposure W = {w0 * 1e3:.4g} ms (W/tau = "
+            f"{a:.3g}): the frames cannot tell a longer exposure from less tracking noise (the "
+            "same likelihood for any W, eps^2 taking the difference), and k, gamma scale as "
+            "B(W/tau) = 2 (cosh(W/tau) - 1)/(W/tau)^2: an exposure 10 % longer than declared "
+            f"gives k and gamma {shift * 100:.2g} % larger ({shift * k / k_err:.2g} SE). Check "
+            "the camera's exposure (integration) time; with several exposures W is identified"]
 
 
 def _drive_friction_note(res, gamma_known) -> str:
