@@ -40,7 +40,7 @@ import numpy as np
 
 from ._fit import _autodiff_pass, _newton_iterate, _plan, at_lower_bound
 from ._newton import fd_hessian_pass
-from ._profile_host import chunked_pass, host_profile_ends, wald_path_roots
+from ._profile_host import chunked_pass, chunked_values, host_profile_ends, wald_path_roots
 
 #: two-sided 95 % normal quantile and the likelihood drop at a 95 % interval end (chi^2_1)
 Z95 = 1.959963984540054
@@ -267,10 +267,11 @@ def _consts():
             "flat_atol": _FLAT_ATOL}
 
 
-def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):
+def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None, values=None):
     """Which parameters need a profile interval (bool per parameter; see the module doc);
     with ``pass_fn`` (a chunked pass, :func:`._profile_host.chunked_pass`, at ``scale``)
-    the likelihood along the Wald paths is evaluated with it (nothing compiled per length)."""
+    the likelihood along the Wald paths is evaluated with it (nothing compiled per length),
+    or with ``values`` (:func:`._profile_host.chunked_values`) at all points at once."""
     value = np.asarray(value, float)
     cov = np.asarray(cov, float)
     at_bound = np.asarray(at_bound, bool)
@@ -280,7 +281,7 @@ def needs_profile(nll, args, value, cov, at_bound, pass_fn=None, scale=None):
     if not np.all(np.isfinite(cov)):
         return np.zeros(value.size, bool)
     if pass_fn is not None:
-        lo, hi = wald_path_roots(pass_fn, scale, value, cov, Z95)
+        lo, hi = wald_path_roots(pass_fn, scale, value, cov, Z95, values)
     else:
         lo, hi = _wald_path_roots(nll, args, jnp.asarray(value), jnp.asarray(cov))
         lo, hi = np.asarray(lo), np.asarray(hi)
@@ -295,15 +296,17 @@ def profile_intervals(nll, args, scale, value, cov, at_bound, hessian="auto"):
     return low, high, ok_lo & ok_hi
 
 
-def profile_ends(nll, args, scale, value, cov, at_bound, hessian="auto"):
-    """:func:`profile_intervals` with an ok flag per end: ``(low, high, ok_low, ok_high)``."""
+def profile_ends(nll, args, scale, value, cov, at_bound, hessian="auto", which=None):
+    """:func:`profile_intervals` with an ok flag per end: ``(low, high, ok_low, ok_high)``;
+    ``which`` (bool per parameter): only those are needed (the host loops compute only
+    theirs; the compiled program, vmapped over all, computes every one)."""
     scale = jnp.asarray(scale)
     x_hat = jnp.log(jnp.maximum(jnp.asarray(value), 1e-300) / scale)
     x_hat = jnp.maximum(x_hat, _LOG_ZERO)
     cov = np.nan_to_num(np.asarray(cov, float), nan=0.0)
     pass_fn = chunked_pass(nll, args, hessian, _FD_STEP)
     if pass_fn is not None:  # loops on the host, pass in chunks: nothing compiled per length
-        return host_profile_ends(pass_fn, scale, x_hat, cov, at_bound, _consts())
+        return host_profile_ends(pass_fn, scale, x_hat, cov, at_bound, _consts(), which)
     low, high, ok_lo, ok_hi, _ = _profile_ends(
         nll, args, scale, x_hat, jnp.asarray(cov), jnp.asarray(at_bound, bool), hessian)
     return np.asarray(low), np.asarray(high), np.asarray(ok_lo), np.asarray(ok_hi)
@@ -328,11 +331,12 @@ class ProfileIntervals:
     def _compute(self, names):
         pass_fn = chunked_pass(self.nll, self.args, self.hessian, _FD_STEP)
         need = needs_profile(self.nll, self.args, self.value, self.cov, self.at_bound,
-                             pass_fn, self.scale)
+                             pass_fn, self.scale,
+                             chunked_values(self.nll, self.args, self.hessian))
         if not need.any():
             return {}, {}
         low, high, ok_lo, ok_hi = profile_ends(self.nll, self.args, self.scale, self.value,
-                                               self.cov, self.at_bound, self.hessian)
+                                               self.cov, self.at_bound, self.hessian, need)
         ivs, kinds = {}, {}
         for j, name in enumerate(names):
             if need[j]:  # an end whose profile did not converge is NaN (the result fills it)
