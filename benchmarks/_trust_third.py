@@ -84,7 +84,7 @@ def third_pass_cases():
     ys = math.sin(0.5) * u + math.cos(0.5) * v + 2e-9 * rng.standard_normal(65536)
     yield "xy: y gain 1.3", _run(lambda: bt.calibrate_xy(bt.xy_from_arrays(
         xs, 1.3 * ys, frame_interval=dt, exposure=1e-9 * dt, temperature=295.0),
-        separate=False), ("correlated at lag 1",))
+        separate=False), ("principal axes are coupled",))
     rng_p = np.random.default_rng(231)
     recs = [bt.Recording(ou(32768, dt, 5e-4 * (p - 0.02), rng_p), frame_interval=dt,
                          exposure=1e-9 * dt, temperature=295.0, laser_power=p)

@@ -23,7 +23,7 @@ RD = 2e-7  # true displacement sensitivity [m/V]
 #: the bead whose Stokes friction is GAMMA (volts need the friction for Rd)
 MD = {"bead_radius_m": GAMMA / (6 * math.pi * ETA), "viscosity_Pa_s": ETA, "friction": "stokes",
       "hydrodynamics": False}
-COUPLED = "correlated at lag 1"
+COUPLED = "principal axes are coupled"
 
 
 def _frames(seed, k1, k2, phi, gain=1.0):
@@ -99,7 +99,7 @@ def test_every_unit_gives_the_metres_statistics(tmp_path, unit, scale):
 
 def _coupling_z(res):
     (note,) = [n for n in res.notes if COUPLED in n]
-    found = re.search(r"lag 1 \(([-+0-9.e]+) and ([-+0-9.e]+) standard errors", note)
+    found = re.search(r"lag-1 correlations ([-+0-9.e]+) and ([-+0-9.e]+) standard errors", note)
     assert found, note
     return float(found.group(1)), float(found.group(2))
 
