@@ -46,6 +46,41 @@ from ._xy_checks import _coupling_note, metres_per_unit, xy_pooling_notes
 RESOLVE_Z = 3.5
 
 
+def _joint_fit(u, v, xy: XYRecording, phi: float, kwargs) -> CalibrationResult:
+    """The joint fit of the traces along the principal axes (one gamma, one eps^2); its
+    refusal in the x/y words (k1 and k2, not k[axis1], k[axis2]), with each axis fitted alone
+    (its own eps^2) to name the likely cause: unequal tracking noise on the two axes, which
+    the shared eps^2 cannot describe (an independent pass: 2 nm on x and 20 nm on y, a
+    refusal listing outliers, a wrong exposure or a short record)."""
+    try:
+        return calibrate([u, v], k="per_recording", **kwargs)
+    except FitError as err:
+        msg = str(err).replace("k[axis1]", "k1").replace("k[axis2]", "k2")
+        raise FitError(_axes_alone(u, v, phi, kwargs) + "The joint fit said: " + msg) from err
+
+
+def _axes_alone(u, v, phi: float, kwargs) -> str:
+    """What each principal axis fitted alone says (the start of the joint fit's refusal)."""
+    said = []
+    for i, rec in enumerate((u, v)):
+        angle = math.degrees(phi) + 90.0 * i
+        try:
+            fit = calibrate(rec, **kwargs)
+        except (FitError, ValueError) as err:
+            said.append(f"axis {i + 1} ({angle:.1f} deg from x) alone is refused too: "
+                        f"{str(err).split(';')[0]}")
+            continue
+        e2 = (f"eps^2 = {fit.tracking_var * 1e18:.3g} +- {fit.tracking_var_err * 1e18:.2g} nm^2"
+              if "tracking_var" in fit.param_names else "no tracking noise in the model")
+        said.append(f"axis {i + 1} ({angle:.1f} deg from x) alone: k = {fit.k * 1e3:.4g} pN/nm, "
+                    f"{e2}")
+    return ("calibrate_xy: the joint fit of the two principal axes (one gamma, one tracking "
+            "noise eps^2 for both) failed. " + "; ".join(said) + ". A tracking noise much "
+            "larger on one axis than the other (or swamping one axis's motion) breaks the "
+            "shared eps^2: calibrate each axis alone (calibrate(xy.project(phi)[i]), its own "
+            "eps^2) or reduce the noise. ")
+
+
 @dataclasses.dataclass(frozen=True)
 class XYCalibration:
     """Result of :func:`calibrate_xy` (SI units; ``summary()`` in lab units).
@@ -292,7 +327,7 @@ def calibrate_xy(xy: XYRecording, *, separate: bool = True, **kwargs) -> XYCalib
                          "stiffness per principal axis and one shared gamma")
     phi, l1, l2, cov = _principal(xy.positions)
     u, v = xy.project(phi)
-    joint = calibrate([u, v], k="per_recording", **kwargs)
+    joint = _joint_fit(u, v, xy, phi, kwargs)
     names = list(joint.param_names)
     idx = [i for i, n in enumerate(names) if n.startswith("k[")]
     cov_k = np.asarray(joint.covariance)[np.ix_(idx, idx)]

@@ -182,3 +182,30 @@ def test_cross_talk_between_the_channels_is_named():
 
     assert all(notes(s, 0.1) for s in (40, 41))
     assert not any(notes(s, 0.0) for s in (40, 41))
+
+
+def test_a_refusal_names_the_axes_alone():
+    """2 nm of tracking noise on x and 20 nm on y (more than the stiff axis's motion): the
+    joint fit's one eps^2 cannot describe it and the fit is refused. The refusal gives each
+    principal axis fitted alone and names unequal tracking noise, in k1/k2 (it listed
+    outliers, a wrong exposure or a short record, and the internal name k[axis2])."""
+    from scipy.signal import lfilter
+
+    kt, g, dt, n, phi = 1.380649e-23 * 295.0, 6 * math.pi * 9.5e-4 * 1.0e-6, 1e-3, 16384, 0.4
+    rng = np.random.default_rng(900)
+
+    def ou(k):
+        a = math.exp(-k * dt / g)
+        e = rng.standard_normal(n) * math.sqrt(kt / k)
+        e[1:] *= math.sqrt(1 - a * a)
+        return lfilter([1.0], [1.0, -a], e)
+
+    u, v = ou(2e-5), ou(3e-5)
+    x = math.cos(phi) * u - math.sin(phi) * v + 2e-9 * rng.standard_normal(n)
+    y = math.sin(phi) * u + math.cos(phi) * v + 2e-8 * rng.standard_normal(n)
+    with pytest.raises(bt.FitError) as err:
+        bt.calibrate_xy(bt.xy_from_arrays(x, y, frame_interval=dt, exposure=1e-9 * dt,
+                                          temperature=295.0))
+    msg = str(err.value)
+    assert "axis 1" in msg and "axis 2" in msg and "calibrate each axis alone" in msg
+    assert "k[axis" not in msg
