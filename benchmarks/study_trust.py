@@ -15,6 +15,7 @@ Outcome per case:
     python benchmarks/study_trust.py --third           # the third pass's (_trust_third.py)
     python benchmarks/study_trust.py --fourth          # the fourth pass's (_trust_fourth.py)
     python benchmarks/study_trust.py --fifth           # the fifth pass's (_trust_fifth.py)
+    python benchmarks/study_trust.py --sixth           # the sixth/seventh passes' (_trust_sixth.py)
 """
 
 from __future__ import annotations
@@ -39,6 +40,8 @@ from _trust_fifth import EXPECTED as FIFTH_EXPECTED  # noqa: E402
 from _trust_fifth import fifth_pass_cases  # noqa: E402
 from _trust_fourth import EXPECTED as FOURTH_EXPECTED  # noqa: E402
 from _trust_fourth import fourth_pass_cases  # noqa: E402
+from _trust_sixth import EXPECTED as SIXTH_EXPECTED  # noqa: E402
+from _trust_sixth import sixth_pass_cases  # noqa: E402
 from _trust_third import EXPECTED as THIRD_EXPECTED  # noqa: E402
 from _trust_third import third_pass_cases  # noqa: E402
 
@@ -263,6 +266,7 @@ EXPECTED = {  # the outcome each class must have; anything else is listed as a f
     "unused": "noted", "equipartition": "noted", "nonstationary": ("noted", "clear error"),
     "pooled": "noted", "duplicate": "clear error", "white frames": "clear error",
     "batch": "honest", **THIRD_EXPECTED, **FOURTH_EXPECTED, **FIFTH_EXPECTED,
+    **SIXTH_EXPECTED,
 }
 
 
@@ -277,12 +281,15 @@ def main(argv=None):
                     help="only the classes of the fourth independent pass (session 24)")
     ap.add_argument("--fifth", action="store_true",
                     help="only the classes of the fifth independent pass (session 25)")
+    ap.add_argument("--sixth", action="store_true",
+                    help="only the classes of the sixth and seventh passes (session 26)")
     a = ap.parse_args(argv)
     bt.enable_x64()
     t0 = time.time()
     rows = []
     gens = (offset_cases, detector_cases, unit_cases, batch_cases, json_cases,
-            second_pass_cases, third_pass_cases, fourth_pass_cases, fifth_pass_cases)
+            second_pass_cases, third_pass_cases, fourth_pass_cases, fifth_pass_cases,
+            sixth_pass_cases)
     if a.second:
         gens = (second_pass_cases,)
     if a.third:
@@ -291,6 +298,8 @@ def main(argv=None):
         gens = (fourth_pass_cases,)
     if a.fifth:
         gens = (fifth_pass_cases,)
+    if a.sixth:
+        gens = (sixth_pass_cases,)
     for gen in gens:
         for name, res in gen():
             want = next(v for k, v in EXPECTED.items() if name.startswith(k))

@@ -56,12 +56,15 @@ def _joint_fit(u, v, xy: XYRecording, phi: float, kwargs) -> CalibrationResult:
         return calibrate([u, v], k="per_recording", **kwargs)
     except FitError as err:
         msg = str(err).replace("k[axis1]", "k1").replace("k[axis2]", "k2")
-        raise FitError(_axes_alone(u, v, phi, kwargs) + "The joint fit said: " + msg) from err
+        alone = _axes_alone(u, v, phi, kwargs)
+        raise FitError(f"calibrate_xy: {msg}" if alone is None
+                       else alone + "The joint fit said: " + msg) from err
 
 
-def _axes_alone(u, v, phi: float, kwargs) -> str:
-    """What each principal axis fitted alone says (the start of the joint fit's refusal)."""
-    said = []
+def _axes_alone(u, v, phi: float, kwargs) -> str | None:
+    """What each principal axis fitted alone says (the start of the joint fit's refusal);
+    None when neither can be fitted alone (the joint fit's reason then stands)."""
+    said, fitted = [], 0
     for i, rec in enumerate((u, v)):
         angle = math.degrees(phi) + 90.0 * i
         try:
@@ -74,6 +77,9 @@ def _axes_alone(u, v, phi: float, kwargs) -> str:
               if "tracking_var" in fit.param_names else "no tracking noise in the model")
         said.append(f"axis {i + 1} ({angle:.1f} deg from x) alone: k = {fit.k * 1e3:.4g} pN/nm, "
                     f"{e2}")
+        fitted += 1
+    if not fitted:
+        return None
     return ("calibrate_xy: the joint fit of the two principal axes (one gamma, one tracking "
             "noise eps^2 for both) failed. " + "; ".join(said) + ". A tracking noise much "
             "larger on one axis than the other (or swamping one axis's motion) breaks the "
