@@ -124,25 +124,34 @@ def test_calibrate_points_xy_recordings_to_calibrate_xy():
             bt.calibrate(data)
 
 
-def test_unequal_axis_sensitivities_are_named():
-    # y recorded with 1.3x the x sensitivity (one Rd used for both axes of a QPD): k1, k2,
-    # gamma and phi came back 14-55 SE off with no note; the principal-axis motions are then
-    # correlated at lag 1, which one isotropic friction cannot produce. Numpy AR(1) axes.
+def _rotated_axes(rng, k1, k2, gamma, dt, n, phi):
+    """x, y [m] of a trap whose principal axes (independent exact AR(1) samples of the OU
+    motion, stiffness k1 and k2, point sampling) lie at ``phi`` from x; numpy only."""
     from scipy.signal import lfilter
 
-    kt, g, dt, n, phi = 1.380649e-23 * 295.0, 6 * math.pi * 9.5e-4 * 1.53e-6, 1 / 1500, 16384, 0.5
+    kt = 1.380649e-23 * 295.0
 
-    def ou(k, rng):
-        a = math.exp(-k * dt / g)
+    def ou(k):
+        a = math.exp(-k * dt / gamma)
         e = rng.standard_normal(n) * math.sqrt(kt / k)
         e[1:] *= math.sqrt(1 - a * a)
         return lfilter([1.0], [1.0, -a], e)
 
+    u, v = ou(k1), ou(k2)
+    return math.cos(phi) * u - math.sin(phi) * v, math.sin(phi) * u + math.cos(phi) * v
+
+
+def test_unequal_axis_sensitivities_are_named():
+    # y recorded with 1.3x the x sensitivity (one Rd used for both axes of a QPD): k1, k2,
+    # gamma and phi came back 14-55 SE off with no note; the principal-axis motions are then
+    # correlated at lag 1, which one isotropic friction cannot produce. Numpy AR(1) axes.
+    g, dt, n = 6 * math.pi * 9.5e-4 * 1.53e-6, 1 / 1500, 16384
+
     def coupled_notes(seed, gain):
         rng = np.random.default_rng(seed)
-        u, v = ou(2e-5, rng), ou(5e-5, rng)
-        x = math.cos(phi) * u - math.sin(phi) * v + 2e-9 * rng.standard_normal(n)
-        y = math.sin(phi) * u + math.cos(phi) * v + 2e-9 * rng.standard_normal(n)
+        x, y = _rotated_axes(rng, 2e-5, 5e-5, g, dt, n, 0.5)
+        x = x + 2e-9 * rng.standard_normal(n)
+        y = y + 2e-9 * rng.standard_normal(n)
         res = bt.calibrate_xy(bt.xy_from_arrays(x, gain * y, frame_interval=dt,
                                                 exposure=1e-9 * dt, temperature=295.0),
                               separate=False)
@@ -158,21 +167,11 @@ def test_cross_talk_between_the_channels_is_named():
     test is nearly blind (an independent pass: 8 % cross-talk, k1 3.5-7.6 SE off, no note).
     Their cross-spectrum has the shape of the two axes' normalised spectra's difference,
     which the score over every frequency sees. Numpy AR(1) axes."""
-    from scipy.signal import lfilter
-
-    kt, g, dt, n, phi = 1.380649e-23 * 295.0, 6 * math.pi * 9.5e-4 * 1.0e-6, 1e-3, 32768, 0.4
-
-    def ou(k, rng):
-        a = math.exp(-k * dt / g)
-        e = rng.standard_normal(n) * math.sqrt(kt / k)
-        e[1:] *= math.sqrt(1 - a * a)
-        return lfilter([1.0], [1.0, -a], e)
+    g, dt, n = 6 * math.pi * 9.5e-4 * 1.0e-6, 1e-3, 32768
 
     def notes(seed, talk):
         rng = np.random.default_rng(seed)
-        u, v = ou(2e-5, rng), ou(4e-5, rng)
-        x = math.cos(phi) * u - math.sin(phi) * v
-        y = math.sin(phi) * u + math.cos(phi) * v
+        x, y = _rotated_axes(rng, 2e-5, 4e-5, g, dt, n, 0.4)
         x, y = x + talk * y, y  # channel y leaks into x
         res = bt.calibrate_xy(bt.xy_from_arrays(x + 2e-9 * rng.standard_normal(n),
                                                 y + 2e-9 * rng.standard_normal(n),
@@ -189,20 +188,10 @@ def test_a_refusal_names_the_axes_alone():
     joint fit's one eps^2 cannot describe it and the fit is refused. The refusal gives each
     principal axis fitted alone and names unequal tracking noise, in k1/k2 (it listed
     outliers, a wrong exposure or a short record, and the internal name k[axis2])."""
-    from scipy.signal import lfilter
-
-    kt, g, dt, n, phi = 1.380649e-23 * 295.0, 6 * math.pi * 9.5e-4 * 1.0e-6, 1e-3, 16384, 0.4
-    rng = np.random.default_rng(900)
-
-    def ou(k):
-        a = math.exp(-k * dt / g)
-        e = rng.standard_normal(n) * math.sqrt(kt / k)
-        e[1:] *= math.sqrt(1 - a * a)
-        return lfilter([1.0], [1.0, -a], e)
-
-    u, v = ou(2e-5), ou(3e-5)
-    x = math.cos(phi) * u - math.sin(phi) * v + 2e-9 * rng.standard_normal(n)
-    y = math.sin(phi) * u + math.cos(phi) * v + 2e-8 * rng.standard_normal(n)
+    dt, n, rng = 1e-3, 16384, np.random.default_rng(900)
+    x, y = _rotated_axes(rng, 2e-5, 3e-5, 6 * math.pi * 9.5e-4 * 1.0e-6, dt, n, 0.4)
+    x = x + 2e-9 * rng.standard_normal(n)
+    y = y + 2e-8 * rng.standard_normal(n)
     with pytest.raises(bt.FitError) as err:
         bt.calibrate_xy(bt.xy_from_arrays(x, y, frame_interval=dt, exposure=1e-9 * dt,
                                           temperature=295.0))
