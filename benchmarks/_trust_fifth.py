@@ -89,6 +89,6 @@ def fifth_pass_cases():
         truth={"k": K5, "gamma": GAMMA})
 
 
-EXPECTED = {"drive:": "noted", "xy:": "honest", "diagnose:": "honest",
+EXPECTED = {"drive:": "noted", "xy: isotropic": "honest", "diagnose:": "honest",
             "prior: gamma": "clear error", "prior: k": "noted", "loader: time": "clear error",
             "design:": "clear error", "loader: an": "honest"}
