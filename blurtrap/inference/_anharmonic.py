@@ -8,9 +8,12 @@ Fokker-Planck generator (``blurtrap.inference._anharmonic_moments``), so no simu
 simulation noise and no time-step bias enter the fit.
 
 **Moments** (frames ``x_t`` minus their mean, ``t = 0 .. n-1``, ``n = N - max(lags)``):
-``mean x_t^2``, ``mean x_t x_{t+l}`` at lags ``l`` (default: 1, 2 and about 0.25, 0.5, 1, 2, 3
-correlation times of a harmonic start fit, so the decay is sampled on the scale of tau) and
-``mean x_t^4``. Model: ``C(0) = sigma0^2 var + eps^2``, ``C(l) = sigma0^2 cov_l`` and
+``mean x_t^2``, ``mean x_t x_{t+l}`` at lags ``l`` (default: 1, 2, 3 and about 0.25, 0.5, 1, 2,
+3 correlation times of a harmonic start fit, so the decay is sampled on the scale of tau),
+``mean x_t^4`` and ``mean x_t^2 x_{t+l}^2`` at ``square_lags`` (default 1, 2: the squared frames
+decay at their own rates, which carry k4; with tau ~ dt the 0.25-3 tau lags all round to 1-2
+and, without lags 3 and the squared frames, the fit had 4 moments for 4 parameters: no J test).
+Model: ``C(0) = sigma0^2 var + eps^2``, ``C(l) = sigma0^2 cov_l`` and
 ``E[(m + e)^4] = sigma0^4 m4 + 6 sigma0^2 var eps^2 + 3 eps^4`` (white Gaussian tracking
 noise), with the dimensionless blurred moments of the generator at ``beta = k4 kT/k^2``,
 ``w = W/tau``, ``d = dt/tau``, ``sigma0^2 = kT/k``, ``tau = gamma/k``. Excess kurtosis carries
@@ -20,7 +23,9 @@ noise), with the dimensionless blurred moments of the generator at ``beta = k4 k
 ``Omega`` of the moment contributions, estimated from the data (Bartlett/Newey-West, bandwidth
 ``~15 tau/dt + max lag``); the fit is Gauss-Newton (Levenberg-damped) with forward-mode JAX
 Jacobians of the exact model moments. Standard errors: ``(G' Omega^-1 G)^-1 / n``; Hansen's
-J statistic ``n Q`` is the goodness of fit (chi^2 with ``p - 4`` dof).
+J statistic ``n Q`` is the goodness of fit (chi^2 with ``p - 4`` dof; at 0 dof a note says the
+fit has no such check). ``intervals``: Wald for k, gamma, eps^2; for k4 the profile of the GMM
+distance (``_anharmonic_fit``), since its delta-method error shrinks with the estimate.
 
 **Exact / approximate.** Exact: the model moments for any exposure (up to the generator grid,
 relative error ~1e-4 for the variance and kurtosis, far below the statistical errors of a few
@@ -51,11 +56,12 @@ import numpy as np
 
 from .._config import float64_scope
 from .._constants import BOLTZMANN
-from ._anharmonic_moments import frame_moments
+from ._anharmonic_fit import BETA_BOUNDS, Z95, gauss_newton, k4_profile_interval
+from ._anharmonic_moments import frame_moments, square_covariance
 from ._fit import chi2_sf
 
-BETA_BOUNDS = (-0.08, 20.0)
 _PARAMS = ("k", "k4", "gamma", "tracking_var")
+DEFAULT_SQUARE_LAGS = (1, 2)
 _LAB = {"k": (1e3, "pN/nm"), "k4": (1e-15, "pN/nm^3"), "gamma": (1e6, "pN s/um"),
         "tracking_var": (1e18, "nm^2")}
 
@@ -90,6 +96,9 @@ class AnharmonicResult:
     converged: bool
     iterations: int
     notes: tuple[str, ...] = ()
+    square_lags: tuple[int, ...] = ()
+    intervals: dict = dataclasses.field(default_factory=dict)
+    interval_kinds: dict = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict in SI units."""
@@ -99,7 +108,10 @@ class AnharmonicResult:
         out.update(param_names=list(_PARAMS), covariance=np.asarray(self.covariance).tolist(),
                    n_frames=self.n_frames, lags=list(self.lags), bandwidth=self.bandwidth,
                    gof=dict(self.gof), converged=self.converged, iterations=self.iterations,
-                   notes=list(self.notes), method="anharmonic_gmm", units="SI")
+                   notes=list(self.notes), method="anharmonic_gmm", units="SI",
+                   square_lags=list(self.square_lags),
+                   intervals={n: [float(a), float(b)] for n, (a, b) in self.intervals.items()},
+                   interval_kinds=dict(self.interval_kinds))
         return out
 
     def summary(self) -> str:
@@ -118,6 +130,10 @@ class AnharmonicResult:
         for name, v, e, unit in rows:
             err = f"{e:10.3g}" if math.isfinite(e) else " " * 10
             lines.append(f"  {name:<20}  {v:12.6g}  {err}  {unit}".rstrip())
+        if "k4" in self.intervals:
+            lo, hi = (v * _LAB["k4"][0] for v in self.intervals["k4"])
+            lines.append(f"  k4 95 % interval: ({lo:.4g}, {hi:.4g}) pN/nm^3   "
+                         f"[{self.interval_kinds.get('k4', '')}]")
         g = self.gof
         lines.append(f"  goodness of fit: J test: statistic = {g['statistic']:.4g}, "
                      f"dof = {g['dof']}, p = {g['p_value']:.3g}")
@@ -132,29 +148,35 @@ class AnharmonicResult:
 def _model(phi, consts, n_grid, n_modes):
     """Scaled model moments at phi = (log k, beta, log gamma, eps^2/s^2).
 
-    consts = (kT/s^2, W, dt, lags): positions are in units of the data scale s."""
-    kt_s2, w, dt, lags = consts
+    consts = (kT/s^2, W, dt, lags, sq_lags): positions are in units of the data scale s."""
+    kt_s2, w, dt, lags, sq_lags = consts
     k, beta, gamma, e2 = jnp.exp(phi[0]), phi[1], jnp.exp(phi[2]), phi[3]
     tau = gamma / k
     var, cov, m4 = frame_moments(beta, w / tau, dt / tau, lags, n_grid, n_modes)
     s02 = kt_s2 / k
     c0 = s02 * var + e2
     q4 = s02**2 * m4 + 6.0 * s02 * var * e2 + 3.0 * e2**2
-    return jnp.concatenate([c0[None], s02 * cov, q4[None]])
+    out = [c0[None], s02 * cov, q4[None]]
+    if sq_lags.shape[0]:
+        sq = square_covariance(beta, w / tau, dt / tau, sq_lags, n_grid, n_modes)
+        out.append(s02**2 * sq + 2.0 * s02 * var * e2 + e2**2)
+    return jnp.concatenate(out)
 
 
 _model_jac = jax.jit(jax.jacfwd(_model), static_argnums=(2, 3))
 
 
 def _default_lags(tau_frames, n):
-    raw = [1, 2] + [round(f * tau_frames) for f in (0.25, 0.5, 1.0, 2.0, 3.0)]
-    top = max(2, n // 20)
+    raw = [1, 2, 3] + [round(f * tau_frames) for f in (0.25, 0.5, 1.0, 2.0, 3.0)]
+    top = max(3, n // 20)
     return tuple(sorted({min(max(int(v), 1), top) for v in raw}))
 
 
-def _contributions(y, lags):
-    n = y.size - max(lags)
-    cols = [y[:n] ** 2] + [y[:n] * y[lag:lag + n] for lag in lags] + [y[:n] ** 4]
+def _contributions(y, lags, sq_lags=()):
+    n = y.size - max(tuple(lags) + tuple(sq_lags))
+    y2 = y**2
+    cols = ([y2[:n]] + [y[:n] * y[lag:lag + n] for lag in lags] + [y2[:n] ** 2]
+            + [y2[:n] * y2[lag:lag + n] for lag in sq_lags])
     return np.stack(cols, axis=1)
 
 
@@ -169,7 +191,7 @@ def _hac(g, bandwidth):
     return omega
 
 
-def _check(recording, lags, bandwidth, n_grid, max_iter):
+def _check(recording, lags, bandwidth, n_grid, max_iter, square_lags=None):
     from ..data import Recording
 
     if not isinstance(recording, Recording):
@@ -189,6 +211,13 @@ def _check(recording, lags, bandwidth, n_grid, max_iter):
                 or arr.max() > recording.n_frames // 10):
             raise ValueError("lags must be >= 2 distinct integers >= 1 and <= n_frames/10 = "
                              f"{recording.n_frames // 10}; got lags = {lags!r}")
+    if square_lags is not None:
+        arr = np.asarray(square_lags)
+        if (arr.ndim != 1 or (arr.size and (not np.issubdtype(arr.dtype, np.integer)
+                                            or np.any(arr < 1) or arr.max() > recording.n_frames // 10))
+                or np.unique(arr).size != arr.size):
+            raise ValueError("square_lags must be distinct integers >= 1 and <= n_frames/10 = "
+                             f"{recording.n_frames // 10} (or empty); got square_lags = {square_lags!r}")
     for name, v, lo in (("bandwidth", bandwidth, 1), ("n_grid", n_grid, 61),
                         ("max_iter", max_iter, 1)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int | np.integer)
@@ -208,42 +237,69 @@ def _start_values(start):
     return k0, g0, e0
 
 
-def _gauss_newton(ghat, winv, model, jac, phi, max_iter, n):
-    """Levenberg-damped Gauss-Newton on Q = r' Winv r; returns (phi, G, converged, its)."""
-    lo, hi = BETA_BOUNDS
+def _fit_setup(recording, lags, square_lags, bandwidth, start):
+    """Start values, lags, the scaled moment contributions and their HAC weight."""
+    from ._calibrate import moment_start
 
-    def q(p):
-        r = ghat - np.asarray(model(jnp.asarray(p)))
-        return float(r @ winv @ r), r
+    if start is None:
+        k0, g0, e0, _ = moment_start(recording)
+    elif hasattr(start, "k") and hasattr(start, "gamma"):
+        k0, g0, e0 = start.k, start.gamma, max(start.tracking_var, 0.0)
+    else:
+        k0, g0, e0 = _start_values(start)
+    tau_frames = g0 / k0 / float(recording.frame_interval)
+    lags = _default_lags(tau_frames, recording.n_frames) if lags is None else tuple(
+        int(v) for v in lags)
+    square_lags = DEFAULT_SQUARE_LAGS if square_lags is None else tuple(
+        int(v) for v in square_lags)
+    x = np.asarray(recording.positions, dtype=np.float64)
+    x = x - x.mean()
+    s = float(x.std())
+    g = _contributions(x / s, lags, square_lags)
+    n = g.shape[0]
+    if bandwidth is None:
+        bandwidth = int(min(math.ceil(15.0 * max(tau_frames, 1.0)) + max(lags + square_lags),
+                            n // 4))
+    winv = np.linalg.inv(_hac(g, bandwidth))
+    return (k0, g0, e0), lags, square_lags, s, g.mean(axis=0), winv, n, int(bandwidth)
 
-    qv, r = q(phi)
-    mu = 1e-3
-    for it in range(1, max_iter + 1):
-        g = np.asarray(jac(jnp.asarray(phi)))
-        a = g.T @ winv @ g
-        b = g.T @ winv @ r
-        scale = np.sqrt(np.diag(a))
-        for _ in range(30):
-            step = np.linalg.solve(a + mu * np.diag(scale**2), b)
-            new = phi + step
-            new[1] = min(max(new[1], lo), hi)
-            qn, rn = q(new)
-            if np.isfinite(qn) and qn <= qv:
-                break
-            mu *= 10.0
-        else:
-            return phi, g, False, it
-        done = n * (qv - qn) < 1e-8 and float(np.max(np.abs(step))) < 1e-6
-        phi, qv, r = new, qn, rn
-        mu = max(mu / 10.0, 1e-9)
-        if done:
-            return phi, np.asarray(jac(jnp.asarray(phi))), True, it
-    return phi, np.asarray(jac(jnp.asarray(phi))), False, max_iter
+
+def _notes(converged, beta, e2_m2, err, dof, n_moments, k4, k4_se, k4_iv, k4_kind):
+    notes = []
+    if not converged:
+        notes.append("Gauss-Newton did not converge; treat the estimates with caution")
+    if dof <= 0:
+        notes.append(f"the J test has {dof} degrees of freedom ({n_moments} moments for 4 "
+                     "parameters): the fit is exactly identified, so it has no goodness-of-fit "
+                     "check (statistic ~0, p = NaN); pass more lags or square_lags for one")
+    if beta <= BETA_BOUNDS[0] + 1e-9 or beta >= BETA_BOUNDS[1] - 1e-9:
+        notes.append(f"beta = {beta:.3g} is at its bound {BETA_BOUNDS}")
+    if beta < 0:
+        notes.append("k4 < 0: a quartic term that does not confine (continued by a sextic "
+                     "term); consistent with a harmonic trap if |k4| < 2 SE")
+    half = Z95 * k4_se
+    if k4_kind.startswith("profile") and half > 0 and max(
+            abs(k4_iv[0] - (k4 - half)), abs(k4_iv[1] - (k4 + half))) > 0.25 * half:
+        notes.append(f"k4's error is not a normal one here (|k4|/SE = {abs(k4) / k4_se:.2g}): "
+                     f"its 95 % interval is intervals['k4'] = ({k4_iv[0]:.3g}, {k4_iv[1]:.3g}) "
+                     "N/m^3 (profile of the GMM distance), not k4 +- 1.96 SE")
+    if e2_m2 < 0:
+        # unconstrained, as a moment estimate is (clipping it at 0 would bias it up)
+        se = float(err[3])
+        z = e2_m2 / se if math.isfinite(se) and se > 0 else math.nan
+        notes.append(f"eps^2 < 0 ({z:.2g} SE): the moment estimate is not held at its bound "
+                     "(unlike calibrate's likelihood fits); "
+                     + ("its error is not available" if not math.isfinite(z) else
+                        "consistent with no tracking noise within its error" if z > -2 else
+                        "a significantly negative eps^2 means the moments do not follow this "
+                        "model (a detector filter, wrong exposure or frame interval)"))
+    return tuple(notes)
 
 
 @float64_scope
-def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, start=None,
-                         n_grid: int = 121, max_iter: int = 50) -> AnharmonicResult:
+def calibrate_anharmonic(recording, *, lags=None, square_lags=None, bandwidth: int | None = None,
+                         start=None, n_grid: int = 121, max_iter: int = 50,
+                         profile: bool = True) -> AnharmonicResult:
     r"""Fit ``k``, ``k4``, ``gamma`` and ``eps^2`` of a quartic trap to one recording.
 
     Generalized method of moments on exact blurred-frame moments (module docstring): valid for
@@ -255,8 +311,10 @@ def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, 
     **Arguments:**
 
     - `recording`: a :class:`blurtrap.Recording` (positions in metres, >= 512 frames).
-    - `lags`: autocovariance lags in frames (default: 1, 2 and ~0.25-3 correlation times of
+    - `lags`: autocovariance lags in frames (default: 1, 2, 3 and ~0.25-3 correlation times of
       the moment start).
+    - `square_lags`: lags of the covariance of squared frames ``mean x_t^2 x_{t+l}^2``
+      (default ``(1, 2)``; ``()`` for none).
     - `bandwidth`: Bartlett bandwidth in frames for the moments' covariance (default
       ``ceil(15 tau/dt) + max(lags)``, at most ``n/4``).
     - `start`: optional ``(k, gamma, eps^2)`` start [SI] or a ``CalibrationResult`` (default:
@@ -264,84 +322,56 @@ def calibrate_anharmonic(recording, *, lags=None, bandwidth: int | None = None, 
     - `n_grid`: grid points of the generator (default 121; relative error of the moments
       ~1e-4 for the variance and kurtosis, ~5e-3 for C(l) at 3 correlation times).
     - `max_iter`: Gauss-Newton iterations (default 50).
+    - `profile`: the 95 % interval of ``k4`` from the profile of the GMM distance (default;
+      ``False``: Wald, and no extra fits).
 
-    **Returns:** :class:`AnharmonicResult` (``summary()`` in lab units, ``to_dict()``).
+    **Returns:** :class:`AnharmonicResult` (``summary()`` in lab units, ``to_dict()``,
+    ``intervals``).
 
     **Raises:** ``TypeError`` for a non-``Recording``; ``ValueError`` naming the argument for
     bad lags, bandwidth, grid or iteration counts, or too short a recording.
     """
-    _check(recording, lags, bandwidth, n_grid, max_iter)
-    from ._calibrate import moment_start
-
+    _check(recording, lags, bandwidth, n_grid, max_iter, square_lags)
     dt, w = float(recording.frame_interval), float(recording.exposure)
     kt = BOLTZMANN * float(recording.temperature)
-    if start is None:
-        k0, g0, e0, _ = moment_start(recording)
-    elif hasattr(start, "k") and hasattr(start, "gamma"):
-        k0, g0, e0 = start.k, start.gamma, max(start.tracking_var, 0.0)
-    else:
-        k0, g0, e0 = _start_values(start)
-    tau_frames = g0 / k0 / dt
-    lags = _default_lags(tau_frames, recording.n_frames) if lags is None else tuple(
-        int(v) for v in lags)
-    x = np.asarray(recording.positions, dtype=np.float64)
-    x = x - x.mean()
-    s = float(x.std())
-    g = _contributions(x / s, lags)
-    n = g.shape[0]
-    if bandwidth is None:
-        bandwidth = int(min(math.ceil(15.0 * max(tau_frames, 1.0)) + max(lags), n // 4))
-    omega = _hac(g, bandwidth)
-    winv = np.linalg.inv(omega)
-    ghat = g.mean(axis=0)
-    consts = (kt / s**2, w, dt, jnp.asarray(lags))
-    n_modes = 16
+    (k0, g0, e0), lags, square_lags, s, ghat, winv, n, bandwidth = _fit_setup(
+        recording, lags, square_lags, bandwidth, start)
+    consts = (kt / s**2, w, dt, jnp.asarray(lags), jnp.asarray(square_lags, dtype=int))
 
     def model(p):
-        return _model(p, consts, n_grid, n_modes)
+        return _model(p, consts, n_grid, 16)
 
     def jac(p):
-        return _model_jac(p, consts, n_grid, n_modes)
+        return _model_jac(p, consts, n_grid, 16)
 
     phi0 = np.array([math.log(k0), 0.0, math.log(g0), e0 / s**2])
-    phi, gm, converged, its = _gauss_newton(ghat, winv, model, jac, phi0, max_iter, n)
+    phi, gm, converged, its = gauss_newton(ghat, winv, model, jac, phi0, max_iter, n)
     cov_phi = np.linalg.inv(gm.T @ winv @ gm) / n
     r = ghat - np.asarray(model(jnp.asarray(phi)))
     jstat = float(n * r @ winv @ r)
-    dof = g.shape[1] - 4
+    dof = ghat.size - 4
     k, beta, gamma, e2 = math.exp(phi[0]), float(phi[1]), math.exp(phi[2]), float(phi[3])
     # d(k, k4, gamma, eps^2)/d(phi); k4 = beta k^2/kT
-    jt = np.zeros((4, 4))
-    jt[0, 0] = k
-    jt[1, 0], jt[1, 1] = 2.0 * beta * k * k / kt, k * k / kt
-    jt[2, 2] = gamma
-    jt[3, 3] = s**2
+    jt = np.diag([k, k * k / kt, gamma, s**2])
+    jt[1, 0] = 2.0 * beta * k * k / kt
     cov = jt @ cov_phi @ jt.T
     err = np.sqrt(np.diag(cov))
-    notes = []
-    if not converged:
-        notes.append("Gauss-Newton did not converge; treat the estimates with caution")
-    if beta <= BETA_BOUNDS[0] + 1e-9 or beta >= BETA_BOUNDS[1] - 1e-9:
-        notes.append(f"beta = {beta:.3g} is at its bound {BETA_BOUNDS}")
-    if beta < 0:
-        notes.append("k4 < 0: a quartic term that does not confine (continued by a sextic "
-                     "term); consistent with a harmonic trap if |k4| < 2 SE")
-    if e2 < 0:
-        # unconstrained, as a moment estimate is (clipping it at 0 would bias it up)
-        se = float(err[3])
-        z = e2 * s**2 / se if math.isfinite(se) and se > 0 else math.nan
-        notes.append(f"eps^2 < 0 ({z:.2g} SE): the moment estimate is not held at its bound "
-                     "(unlike calibrate's likelihood fits); "
-                     + ("its error is not available" if not math.isfinite(z) else
-                        "consistent with no tracking noise within its error" if z > -2 else
-                        "a significantly negative eps^2 means the moments do not follow this "
-                        "model (a detector filter, wrong exposure or frame interval)"))
+    vals = (k, beta * k * k / kt, gamma, e2 * s**2)
+    ivs = {nm: (v - Z95 * e, v + Z95 * e) for nm, v, e in zip(_PARAMS, vals, err, strict=True)}
+    kinds = dict.fromkeys(_PARAMS, "wald")
+    if profile and converged:
+        ivs["k4"], kinds["k4"] = k4_profile_interval(ghat, winv, model, jac, phi, n, kt,
+                                                     float(err[1]))
     return AnharmonicResult(
-        k=k, k_err=float(err[0]), k4=beta * k * k / kt, k4_err=float(err[1]), gamma=gamma,
-        gamma_err=float(err[2]), tracking_var=e2 * s**2, tracking_var_err=float(err[3]),
+        k=k, k_err=float(err[0]), k4=vals[1], k4_err=float(err[1]), gamma=gamma,
+        gamma_err=float(err[2]), tracking_var=vals[3], tracking_var_err=float(err[3]),
         beta=beta, beta_err=float(math.sqrt(cov_phi[1, 1])), covariance=cov,
         temperature=float(recording.temperature), n_frames=int(recording.n_frames),
-        lags=lags, bandwidth=int(bandwidth),
+        lags=lags, bandwidth=bandwidth,
         gof={"test": "J (GMM overidentification)", "statistic": jstat, "dof": dof,
              "p_value": float(chi2_sf(jstat, dof)) if dof > 0 else math.nan},
-        converged=bool(converged), iterations=int(its), notes=tuple(notes))
+        converged=bool(converged), iterations=int(its),
+        notes=_notes(converged, beta, vals[3], err, dof, ghat.size, vals[1], float(err[1]),
+                     ivs["k4"], kinds["k4"]),
+        square_lags=square_lags, intervals={nm: (float(a), float(b)) for nm, (a, b) in ivs.items()},
+        interval_kinds=kinds)

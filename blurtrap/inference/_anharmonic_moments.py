@@ -104,3 +104,31 @@ def frame_moments(beta, w, d, lags, n_grid=121, n_modes=16):
     weight = xm[0, ia] * xm[ia, ib] * xm[ib, ic] * xm[ic, 0]
     m4 = 24.0 * jnp.sum(weight * _simplex4(z[ia], z[ib], z[ic]))
     return var, cov, m4
+
+
+def _simplex2(za, zb):
+    """Integral over the unit 2-simplex of exp(-za s1 - zb s2) (s0, s1, s2 >= 0, sum 1)."""
+    zero = jnp.zeros_like(za)
+    diag = jnp.stack([zero, -za, -zb], axis=-1)
+    a = jax.vmap(jnp.diag)(diag) + jnp.diag(jnp.ones(2), 1)[None]
+    return jax.vmap(jsl.expm)(a)[:, 0, 2]
+
+
+def square_covariance(beta, w, d, sq_lags, n_grid=121, n_modes=16):
+    """Dimensionless ``E[m_0^2 m_l^2]`` of blurred frames at lags ``l >= 1`` (no noise).
+
+    The two exposures are disjoint (``l d >= w``), so for ordered times the four-point function
+    factorises: ``E[m_0^2 m_l^2] = 4 sum_b v_b^2 exp(-lam_b (l d - w))`` with
+    ``v_b = sum_a X_0a X_ab A(z_a, z_b)`` and ``A`` the integral of
+    ``exp(-z_a s1 - z_b s2)`` over the unit 2-simplex (``A(z, 0) = S(z)/2``: the ``b = 0``
+    term is ``var^2``; for a Gaussian frame process it equals ``var^2 + 2 C(l)^2``)."""
+    lam, xm = spectrum(beta, n_grid, n_modes)
+    z = lam * w
+    odd = jnp.arange(1, n_modes, 2)
+    even = jnp.arange(0, n_modes, 2)
+    ia, ib = (g.ravel() for g in jnp.meshgrid(odd, even, indexing="ij"))
+    amat = _simplex2(z[ia], z[ib]).reshape(odd.size, even.size)
+    v = jnp.sum(xm[0, odd][:, None] * xm[odd][:, even] * amat, axis=0)
+    sq_lags = jnp.asarray(sq_lags)
+    decay = jnp.exp(-lam[even][None, :] * (sq_lags[:, None] * d - w))
+    return 4.0 * jnp.sum(v[None, :] ** 2 * decay, axis=1)
