@@ -66,7 +66,33 @@ def _check_f_range(recs, method, likelihood, f_range):
                          f"Nyquist frequency fs/2 = {nyq:g} Hz of the recordings, where "
                          "there are no ordinates; expected f_max <= fs/2 (f_range is in "
                          "Hz, not kHz)")
+    _check_band_ordinates(recs, lo, hi)
     return (lo, hi)
+
+
+#: a spectral fit over fewer periodogram ordinates than this (all recordings, at the full
+#: record's spacing 1/T) is refused: three or four parameters cannot be fitted from them
+_MIN_BAND_ORDINATES = 16
+
+
+def _check_band_ordinates(recs, lo: float, hi: float) -> None:
+    """``f_range`` keeps at least :data:`_MIN_BAND_ORDINATES` ordinates (an independent
+    pass: ``--f-range 0.1 0.5`` meant in kHz kept 2 ordinates and ended in "did not
+    converge ... check the data")."""
+    count = 0
+    for r in recs:
+        t = r.n_frames * float(r.frame_interval)
+        count += max(0, math.floor(hi * t) - math.ceil(lo * t) + 1)
+    if count >= _MIN_BAND_ORDINATES:
+        return
+    t_max = max(r.n_frames * float(r.frame_interval) for r in recs)
+    nyq = max(0.5 / float(r.frame_interval) for r in recs)
+    khz = (f"; f_range is in Hz: did you mean ({lo * 1e3:g}, {hi * 1e3:g}) Hz?"
+           if hi * 1e3 <= nyq * (1.0 + 1e-9) else "")
+    raise ValueError(f"f_range = ({lo:g}, {hi:g}) Hz keeps only {count} periodogram "
+                     f"ordinate(s) of the recordings (spacing 1/T = {1.0 / t_max:.3g} Hz at "
+                     f"best), too few to fit the trap's parameters: expected at least "
+                     f"{_MIN_BAND_ORDINATES}{khz}")
 
 
 def _check_diffusion(method, diffusion, pade):

@@ -98,6 +98,16 @@ def test_f_max_above_nyquist_is_refused(rec, monkeypatch, kw, f_range):
         bt.calibrate(rec, f_range=f_range, **kw)
 
 
+@pytest.mark.parametrize(("f_range", "hint"), [((0.1, 0.5), r"did you mean \(100, 500\) Hz"),
+                                               ((300.0, 300.1), r"at least 16$")])
+def test_a_band_with_too_few_ordinates_is_refused(rec, monkeypatch, f_range, hint):
+    """--f-range 0.1 0.5 meant in kHz kept 2 ordinates and ended in 'did not converge ...
+    check the data': the band's ordinate count is checked first, with the kHz reading."""
+    monkeypatch.setattr(cal_mod, "_calibrate", _no_fit)
+    with pytest.raises(ValueError, match=r"keeps only \d+ periodogram ordinate.*" + hint):
+        bt.calibrate(rec, f_range=f_range, method="psd")
+
+
 def test_f_max_at_nyquist_is_accepted(rec):
     assert opt_mod._check_options([rec], "psd", "auto", None, None, (10.0, 750.0), None,
                                   False, None, True)[1] == (10.0, 750.0)
