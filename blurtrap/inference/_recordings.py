@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 
 from .._config import warn_if_float32
-from .._constants import BOLTZMANN
 
 
 def as_recordings(data: Any) -> list:
@@ -133,7 +132,7 @@ def physics_notes(recs, radii, res, plan) -> list:
     found k = 112 N/m and gamma 1e6 x Stokes with no note); not for volts through a known
     friction (gamma is the friction given). A friction given beside a drive is not used:
     the note says so and compares it with the fitted gamma."""
-    exposure = exposure_notes(res, plan) + held_tracking_notes(res, plan)
+    exposure = exposure_notes(res, plan)
     if plan.volts and plan.drive is None:
         return exposure
     if plan.volts and plan.gamma_known is not None:
@@ -146,50 +145,6 @@ def physics_notes(recs, radii, res, plan) -> list:
 def _blur_b(a: float) -> float:
     """B(a) = 2 (cosh a - 1) / a^2 (paper eq. 8), stable at small a."""
     return 1.0 + a * a / 12.0 if a < 1e-4 else 2.0 * (math.cosh(a) - 1.0) / (a * a)
-
-
-def _blur_s(a: float) -> float:
-    """S(a) = 2/a - 2 (1 - e^-a)/a^2 (paper eq. 6), S(0) = 1."""
-    return 1.0 - a / 3.0 + a * a / 12.0 if a < 1e-4 else 2.0 / a + 2.0 * math.expm1(-a) / (a * a)
-
-
-#: the held-tracking note appears when 1 nm^2 of tracking error would move k by more than
-#: this many of its standard errors
-_HELD_TRACKING_SE = 1.0
-
-
-def held_tracking_notes(res, plan) -> list:
-    """A note when eps^2 is held without an error and k rests on it more than k's error says.
-
-    The frames' variance is the bead's blurred motion ``kT/k S(W/tau)`` plus eps^2: an eps^2
-    held at 0 reads every nm^2 of tracking error as motion (a slow camera at W/tau = 55, 2 nm
-    rms of tracking error: k half the truth, 85 SE off, nothing said). To first order 1 nm^2
-    changes k by ``1 nm^2 / (sigma_b^2 (1 - a S'(a)/S(a)))`` (``a = W/tau`` with tau fixed
-    by gamma)."""
-    held = (plan.fixed or {}).get("tracking_var")
-    names = list(res.param_names)
-    if held is None or float(held[1]) > 0 or "gamma" not in names or plan.volts:
-        return []
-    k, k_err, gamma = float(res.k), float(res.k_err), float(res.gamma)
-    rec = plan.recordings[0]
-    w = float(rec.exposure) if plan.model.blur else 0.0
-    if not (k > 0 and gamma > 0 and math.isfinite(k_err) and k_err > 0):
-        return []
-    a = w * k / gamma
-    var_b = BOLTZMANN * float(rec.temperature) / k * _blur_s(a)
-    h = 1e-6 * max(a, 1e-3)
-    slope = 1.0 - (a * (_blur_s(a + h) - _blur_s(a - h)) / (2 * h) / _blur_s(a) if a > 0 else 0.0)
-    shift = 1e-18 / (var_b * slope)  # relative change of k per nm^2 of eps^2
-    if shift * k < _HELD_TRACKING_SE * k_err:
-        return []
-    return [f"k rests on the held tracking_var = {float(held[0]) * 1e18:.3g} nm^2 (held without "
-            f"an error): the bead's blurred motion has a variance of only {var_b * 1e18:.3g} nm^2 "
-            f"(kT/k S(W/tau), W/tau = {a:.3g}), so each nm^2 of tracking error in the frames "
-            f"beyond the held value (1 nm rms) is read as bead motion and makes k about "
-            f"{shift * 100:.2g} % smaller ({shift * k / k_err:.2g} SE), which these frames cannot "
-            "check. Hold it with its uncertainty (fixed={'tracking_var': (value, se)}; CLI --fix "
-            "tracking_var=V+-SE in nm^2) to carry it into k's error, or measure it (a bead stuck "
-            "to the surface, or several exposures)"]
 
 
 #: the exposure note appears when a declared exposure 10 % off would move k by more than
