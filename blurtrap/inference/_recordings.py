@@ -143,8 +143,10 @@ def physics_notes(recs, radii, res, plan) -> list:
 
 
 def _blur_b(a: float) -> float:
-    """B(a) = 2 (cosh a - 1) / a^2 (paper eq. 8), stable at small a."""
-    return 1.0 + a * a / 12.0 if a < 1e-4 else 2.0 * (math.cosh(a) - 1.0) / (a * a)
+    """B(a) = 2 (cosh a - 1) / a^2 (paper eq. 8): the physics kernel's rho B at rho = 1."""
+    from ..physics import rho_b_unchecked
+
+    return float(rho_b_unchecked(np.float64(a), np.float64(0.0)))
 
 
 #: the exposure note appears when a declared exposure 10 % off would move k by more than
