@@ -20,6 +20,7 @@ from .data.internal import (
     MIN_PLAUSIBLE_POSITION_STD_M,
     MIN_PLAUSIBLE_TEMPERATURE_K,
 )
+from .design.internal import MIN_FRAMES, largest_candidate, total_time_needed
 
 #: the temperatures [K] and the largest laser power [mW] blurtrap.Recording accepts with its
 #: unit checks (blurtrap.data's own limits)
@@ -194,10 +195,9 @@ def check_design(args) -> list[str]:
     positive("--max-fps", args.max_fps, "Hz")
     positive("--min-exposure-ms", args.min_exposure_ms, "ms")
     positive("--dead-time-ms", args.dead_time_ms, "ms", zero=True)
-    if args.frames is not None and args.frames < 64:
-        raise CliError(f"--frames must be >= 64 frames per recording; got {args.frames}")
-    if args.total_s is not None:
-        positive("--total-s", args.total_s, "s")
+    if args.frames is not None and args.frames < MIN_FRAMES:
+        raise CliError(f"--frames must be >= {MIN_FRAMES} frames per recording; got {args.frames}")
+    _check_design_candidates(args)
     if args.friction_error is not None and not (math.isfinite(args.friction_error) and args.friction_error >= 0):
         raise CliError(f"--friction-error is a relative error in %, >= 0; got {args.friction_error:g}")
     check_tracking(args.tracking_nm)
@@ -210,6 +210,29 @@ def check_design(args) -> list[str]:
                 f"blurtrap's loaders read as ms: if the camera runs at {args.max_fps:g} kHz, use --max-fps "
                 f"{_num(args.max_fps * 1e3)}"]
     return []
+
+
+def _check_design_candidates(args) -> None:
+    """--series, --powers and a --total-s long enough for every candidate's recordings."""
+    if any(n < 1 for n in args.series):
+        raise CliError("--series takes numbers of exposures >= 1 to try (e.g. --series 1 2 3); got --series "
+                       + " ".join(str(n) for n in args.series))
+    powers = args.powers or ()
+    if args.powers is not None and (len(set(powers)) < 2 or len(set(powers)) != len(powers)
+                                    or not all(math.isfinite(p) and p > 0 for p in powers)):
+        raise CliError("--powers takes at least 2 distinct powers > 0, as multiples of the power --k is at "
+                       f"(e.g. --powers 0.5,1,2); got --powers {','.join(f'{p:g}' for p in powers)}")
+    if args.total_s is None:
+        return
+    positive("--total-s", args.total_s, "s")
+    n_rec = largest_candidate(args.series, powers)
+    need = total_time_needed(args.max_fps, n_rec)
+    if args.total_s * args.max_fps * (1 + 1e-12) < MIN_FRAMES * n_rec:
+        raise CliError(f"--total-s {args.total_s:g} is {args.total_s * args.max_fps:.4g} frames at --max-fps "
+                       f"{args.max_fps:g}, too few to split into {n_rec} recordings (the largest candidate) of "
+                       f"at least {MIN_FRAMES} frames each: use --total-s {need:.3g} or more"
+                       + (", or fewer exposures in --series" if n_rec == max(args.series) > largest_candidate((), ())
+                          else ""))
 
 
 def _check_design_timing(args) -> None:

@@ -80,7 +80,7 @@ def test_simulate_blurred_away_positions_name_the_flags(tmp_path, capsys):
         assert flag in line, line
 
 
-DESIGN = (("--k", "0.05"), ("--max-fps", "1500"), ("--frames", "4096"), ("--series", "1"),
+DESIGN = (("--k", "0.05"), ("--max-fps", "1500"), ("--total-s|--frames", "4096"), ("--series", "1"),
           ("--gamma|--radius-um", "1.5"))
 
 
@@ -112,6 +112,18 @@ DESIGN = (("--k", "0.05"), ("--max-fps", "1500"), ("--frames", "4096"), ("--seri
     (["--dead-time-ms", "1"], r"--dead-time-ms 1 leaves no time for an exposure: .*below 0\.666 ms"),
     (["--dead-time-ms", "20"], r"--dead-time-ms 20 leaves no time .*: did you give us\? use --dead-time-ms 0\.02$"),
     (["--dead-time-ms", "-1"], r"--dead-time-ms must be >= 0 ms; got -1"),
+    (["--powers", "0"], r"--powers takes at least 2 distinct powers > 0, as multiples of the power --k is at "
+                        r"\(e\.g\. --powers 0\.5,1,2\); got --powers 0$"),
+    (["--powers", "0.5,1,1"], r"--powers takes at least 2 distinct .*; got --powers 0\.5,1,1$"),
+    (["--powers", "0.5,-1"], r"--powers takes at least 2 distinct .*; got --powers 0\.5,-1$"),
+    (["--series", "1", "0"], r"--series takes numbers of exposures >= 1 to try \(e\.g\. --series 1 2 3\); "
+                             r"got --series 1 0$"),
+    (["--total-s", "0.01"], r"--total-s 0\.01 is 15 frames at --max-fps 1500, too few to split into 4 "
+                            r"recordings \(the largest candidate\) of at least 64 frames each: use --total-s "
+                            r"0\.171 or more$"),
+    (["--total-s", "0.3", "--series", "10"], r"--total-s 0\.3 is 450 frames .* into 10 recordings .*: use "
+                                             r"--total-s 0\.427 or more, or fewer exposures in --series$"),
+    (["--total-s", "0", "--series", "10"], r"--total-s must be > 0 s; got 0$"),
 ])
 def test_design_bad_values_name_the_flag(capsys, argv, pattern):
     capsys.readouterr()

@@ -23,6 +23,48 @@ from ..physics import water_viscosity
 TARGETS = ("k", "gamma", "both", "determinant", "force_sensitivity")
 
 
+#: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
+PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
+#: the fewest frames per recording a design may plan
+MIN_FRAMES = 64
+
+
+def largest_candidate(series, powers) -> int:
+    """The most recordings any candidate splits the budget into: the paper's series, the
+    longest of `series`, or one per laser power."""
+    return max([len(PAPER_SERIES), *series, len(powers or ())])
+
+
+def total_time_needed(max_fps: float, n_rec: int) -> float:
+    """The shortest total time [s] that gives each of `n_rec` recordings at least
+    ``MIN_FRAMES`` frames at `max_fps`, rounded up to 3 significant digits."""
+    need = MIN_FRAMES * n_rec / max_fps
+    step = 10.0 ** (math.floor(math.log10(need)) - 2)
+    return math.ceil(need / step * (1 - 1e-12)) * step
+
+
+def checked_budget(n_frames, total_time, max_fps: float, series, powers) -> None:
+    """Exactly one of `n_frames` (>= 64 per recording) or `total_time` (at least 64 frames
+    for each recording of the largest candidate at `max_fps`), and the `series` lengths."""
+    if (n_frames is None) == (total_time is None):
+        raise ValueError("give exactly one of n_frames (per recording) or total_time [s]")
+    if n_frames is not None and (isinstance(n_frames, bool) or int(n_frames) != n_frames
+                                 or n_frames < MIN_FRAMES):
+        raise ValueError(f"n_frames must be an integer >= {MIN_FRAMES}; got n_frames = {n_frames!r}")
+    for n_exp in series:
+        if isinstance(n_exp, bool) or not isinstance(n_exp, (int, np.integer)) or n_exp < 1:
+            raise ValueError(f"series must hold whole numbers of exposures >= 1; got {n_exp!r}")
+    if total_time is None:
+        return
+    _check("total_time", total_time, unit="s")
+    n_rec = largest_candidate(series, powers)
+    if total_time * max_fps * (1 + 1e-12) < MIN_FRAMES * n_rec:
+        raise ValueError(f"total_time = {total_time:g} s is {total_time * max_fps:.4g} frames at max_fps = "
+                         f"{max_fps:g} Hz, too few to split into {n_rec} recordings (the largest candidate) "
+                         f"of at least {MIN_FRAMES} frames each: give total_time >= "
+                         f"{total_time_needed(max_fps, n_rec):.3g} s")
+
+
 def _check(name, value, lo=0.0, unit=""):
     if value is None or not np.isfinite(value) or value <= lo:
         raise ValueError(f"{name} must be a finite number > {lo:g} {unit}; got {name} = "

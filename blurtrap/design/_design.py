@@ -25,17 +25,19 @@ import optimistix as optx
 from .._config import float64_scope
 from ..physics import BOLTZMANN
 from ._bounds import bound_probability, bounded_covariance
-from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
 from ._checks import (
+    PAPER_SERIES,
     NotIdentifiedError,
     _check,
     _checked_friction,
     _checked_noise,
     check_timing,
     check_units_of,
+    checked_budget,
     checked_current,
     checked_trap,
 )
+from ._checks import TARGETS as TARGETS  # the targets design accepts (re-exported)
 from ._fisher import K_PAD, _informations, candidate_informations, padded
 from ._power import checked_powers, power_candidates
 from ._result import Acquisition, DesignResult
@@ -45,8 +47,6 @@ from ._result import Acquisition, DesignResult
 _EXACT_FRICTION_SE = 1e-12
 #: a relative SE of k or gamma above this (100 %) means the design does not identify it
 UNIDENTIFIED_SE = 1.0
-#: the paper's exposure series relative to the fastest frame interval (W/dt_min); section 5.4
-PAPER_SERIES = (0.15, 0.3, 0.6, 1.0)
 #: exposure slots of the optimiser's program: series of up to 3 exposures share one
 #: compilation (a single stiffness and a range of three are two programs: padding the
 #: stiffnesses would triple every evaluation of a single-stiffness design)
@@ -322,13 +322,7 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     powers = checked_powers(laser_powers)
     ks, gamma, temperature = checked_trap(k, gamma, radius, viscosity, temperature, check_units)
     dt_min = 1.0 / _check("max_fps", max_fps, unit="Hz")
-    if (n_frames is None) == (total_time is None):
-        raise ValueError("give exactly one of n_frames (per recording) or total_time [s]")
-    if n_frames is not None and (isinstance(n_frames, bool) or int(n_frames) != n_frames
-                                 or n_frames < 64):
-        raise ValueError(f"n_frames must be an integer >= 64; got n_frames = {n_frames!r}")
-    if total_time is not None:
-        _check("total_time", total_time, unit="s")
+    checked_budget(n_frames, total_time, max_fps, series, powers)
     w_min = _check("min_exposure", min_exposure, unit="s")
     if check_units:
         check_units_of(tracking_std, max_fps, w_min, reference_exposure)
@@ -344,15 +338,13 @@ def design(*, k, gamma=None, radius=None, viscosity=None, temperature: float = 2
     cands = [_acquisition("W = dt at the fastest frame rate",
                           [(dt_min, dt_min - dead_time, n_each(1))], *common),
              _acquisition("the paper's exposure series",
-                          [(dt_min, max(w_min, f * (dt_min - dead_time)), n_each(4))
+                          [(dt_min, max(w_min, f * (dt_min - dead_time)), n_each(len(PAPER_SERIES)))
                            for f in PAPER_SERIES], *common)]
     if cur is not None:
         cands.append(_acquisition("your current design", cur, *common))
     budget = total_time if total_time is not None else n_frames
     assert budget is not None  # exactly one of n_frames / total_time is given (checked above)
     for n_exp in series:
-        if isinstance(n_exp, bool) or not isinstance(n_exp, (int, np.integer)) or n_exp < 1:
-            raise ValueError(f"series must hold whole numbers of exposures >= 1; got {n_exp!r}")
         best = _optimised(int(n_exp), common, dt_min, w_min, float(dead_time), float(budget),
                           total_time is not None)
         if best is not None:

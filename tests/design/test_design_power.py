@@ -195,7 +195,8 @@ def test_design_cli_powers(capsys):
     assert [x["laser_power_relative"] for x in doc["best"]["recordings"]] == [0.5, 1.0, 2.0]
 
 
-@pytest.mark.parametrize("arg, match", [("0.5,x", "comma-separated"), ("1", "laser_powers")])
+@pytest.mark.parametrize("arg, match", [("0.5,x", "comma-separated"),
+                                        ("1", "--powers takes at least 2 distinct powers")])
 def test_design_cli_bad_powers(capsys, arg, match):
     code = main(["design", "--k", "0.05", "--radius-um", "1", "--max-fps", "1000",
                  "--frames", "4096", "--powers", arg])

@@ -79,3 +79,17 @@ def test_exposure_longer_than_the_frame_interval_is_named(kw, pattern):
     with pytest.raises(ValueError, match=pattern) as err:
         design(**kw)
     assert "[0, -" not in str(err.value)
+
+
+@pytest.mark.parametrize("kw, n_rec, need", [(dict(total_time=0.01), 4, 0.171),
+                                             (dict(total_time=0.3, series=(1, 10)), 10, 0.427),
+                                             (dict(total_time=0.1, laser_powers=(0.5, 1, 2, 3, 4)), 5, 0.214)])
+def test_a_total_time_too_short_for_64_frames_per_recording_is_refused(kw, n_rec, need):
+    """A total time split into recordings of a few frames each (7 frames per recording, SEs of
+    35 %, were designed) is refused, naming the frames it gives and the time it takes."""
+    with pytest.raises(ValueError, match=rf"total_time = {kw['total_time']:g} s is .* frames at max_fps = "
+                                         rf"1500 Hz, too few to split into {n_rec} recordings .* at least 64 "
+                                         rf"frames each: give total_time >= {need}"):
+        design(**kw)
+    enough = design(**{**kw, "total_time": need})
+    assert all(n >= 64 for _, _, n in enough.best.recordings)
