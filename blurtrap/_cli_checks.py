@@ -9,6 +9,7 @@ the plausible ranges of k and gamma (``QUANTITIES[...].bounds``), in lab units."
 from __future__ import annotations
 
 import math
+import re
 
 from .cli import CliError
 from .data.internal import (
@@ -286,3 +287,20 @@ def check_bands(args) -> None:
         if not (0 <= a < b and math.isfinite(b)):
             lo, hi = names.split()
             raise CliError(f"{flag} {names} needs 0 <= {lo} < {hi} [Hz]; got {flag} {a:g} {b:g}")
+
+
+_PAIR = r"\(\s*([-+.\deE]+),\s*([-+.\deE]+)\s*\)"
+
+
+def _exclude_flags(match) -> str:
+    return " ".join(f"--exclude {float(a):g} {float(b):g}" for a, b in re.findall(_PAIR, match.group(1)))
+
+
+def band_flag_words(msg: str) -> str:
+    """calibrate's band messages (``f_range = (0.1, 0.5) Hz``, ``excluded_ranges = [...]``,
+    ``f_max``) in the command line's flags (``--f-range 0.1 0.5``, ``--exclude A B``, FMAX)."""
+    msg = re.sub(rf"did you mean {_PAIR} Hz\?", lambda m: f"did you mean --f-range {m[1]} {m[2]}?", msg)
+    msg = re.sub(rf"f_range = {_PAIR} Hz", lambda m: f"--f-range {m[1]} {m[2]}", msg)
+    msg = re.sub(r"excluded_ranges = \[(.*?)\] Hz", _exclude_flags, msg)
+    msg = re.sub(r"\bf_max\b", "FMAX", msg)
+    return re.sub(r"\bf_range\b", "--f-range", msg)

@@ -8,7 +8,14 @@ import math
 import sys
 from typing import Any
 
-from ._cli_checks import check_bands, check_design, check_simulate, check_simulated_spread, not_identified_message
+from ._cli_checks import (
+    band_flag_words,
+    check_bands,
+    check_design,
+    check_simulate,
+    check_simulated_spread,
+    not_identified_message,
+)
 from .cli import CliError, dumps_json
 
 
@@ -31,7 +38,7 @@ def calibrate_command(args) -> int:
     from pathlib import Path
 
     from .data import holds_xy
-    from .inference import calibrate
+    from .inference import FitError, calibrate
 
     path = Path(args.manifest)
     _check_input_path(path)
@@ -63,7 +70,12 @@ def calibrate_command(args) -> int:
         kw["diffusion"] = args.diffusion * 1e-12
     if xy:
         return _calibrate_xy(path, kw, args.json)
-    result = calibrate(str(path), **kw)
+    try:
+        result = calibrate(str(path), **kw)
+    except (ValueError, FitError) as err:  # the band options by their flags
+        if args.f_range is None and not args.exclude:
+            raise
+        raise type(err)(band_flag_words(str(err))) from err
     post = None
     if args.posterior:
         from .inference import sample_posterior

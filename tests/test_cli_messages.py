@@ -166,3 +166,55 @@ def test_calibrate_reversed_bands_name_the_flag(tmp_path, capsys, monkeypatch, a
     assert main(["calibrate", str(manifest), "--method", "psd", *argv]) == 1
     line = _error_line(capsys.readouterr().err, "calibrate")
     assert re.search(pattern, line), line
+
+
+@pytest.fixture(scope="module")
+def manifest(tmp_path_factory):
+    """A 4096-frame trace at 1500 fps (f_c ~ 300 Hz) from an AR(1) recursion in numpy."""
+    import math
+
+    import numpy as np
+    from scipy.signal import lfilter
+
+    import blurtrap as bt
+
+    rng = np.random.default_rng(3)
+    k, gamma, dt = 5e-5, 2.68e-8, 1 / 1500
+    rho, sig = math.exp(-dt * k / gamma), math.sqrt(1.380649e-23 * 295.0 / k)
+    x = lfilter([1.0], [1.0, -rho], rng.standard_normal(4096) * sig * math.sqrt(1 - rho**2))
+    path = tmp_path_factory.mktemp("band") / "m.json"
+    bt.save_manifest(bt.Recording(x, frame_interval=dt, exposure=1e-5), path)
+    return str(path)
+
+
+@pytest.mark.parametrize("argv, pattern", [
+    (["--f-range", "0.1", "0.5"], r"--f-range 0\.1 0\.5 keeps only 1 periodogram ordinate\(s\) .*; --f-range is "
+                                  r"in Hz: did you mean --f-range 100 500\?$"),
+    (["--f-range", "10", "5000"], r"--f-range 10 5000: FMAX = 5000 Hz is above the Nyquist frequency fs/2 = 750 Hz "
+                                  r".*expected FMAX <= fs/2 \(--f-range is in Hz, not kHz\)$"),
+    (["--f-range", "1000", "2000"], r"--f-range 1000 2000 starts above the Nyquist frequency 750 Hz"),
+])
+def test_calibrate_band_messages_name_the_flag(manifest, capsys, argv, pattern):
+    """The API's band refusals (``f_range = (0.1, 0.5) Hz ... did you mean (100, 500) Hz?``)
+    in the command line's flags."""
+    capsys.readouterr()
+    assert main(["calibrate", manifest, "--method", "psd", *argv]) == 1
+    line = _error_line(capsys.readouterr().err, "calibrate")
+    assert re.search(pattern, line), line
+
+
+def test_calibrate_failed_fit_names_the_band_flags(manifest, capsys, monkeypatch):
+    """A fit that fails in a band the user chose names it by --f-range and --exclude."""
+    from blurtrap.inference import FitError
+    from blurtrap.inference import _calibrate as cal_mod
+
+    def refuse(*a, **k):
+        raise FitError("psd fit: the Fisher information is singular")
+
+    monkeypatch.setattr(cal_mod, "_calibrate", refuse)
+    capsys.readouterr()
+    argv = ["--f-range", "100", "200", "--exclude", "150", "160", "--exclude", "170", "170.5"]
+    assert main(["calibrate", manifest, "--method", "psd", *argv]) == 1
+    line = _error_line(capsys.readouterr().err, "calibrate")
+    assert re.search(r"confined to --f-range 100 200 and --exclude 150 160 --exclude 170 170\.5: \d+ of the "
+                     r"2048 periodogram ordinates\..* widen --f-range", line), line

@@ -20,7 +20,7 @@ from ._instrument import prepare_instrument
 from ._irregular import any_irregular, rounding_notes
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
-from ._options import _check_options, _flag
+from ._options import _check_options, _flag, band_sentence
 from ._problems import make_layout
 from ._recordings import _bead_radii, as_recordings, misfit_note, physics_notes
 from ._refusals import _check_psd_blocks, _no_temporal_information_message, known_friction_message
@@ -141,9 +141,12 @@ def calibrate(
                               anti_aliasing=anti_aliasing, excluded_ranges=excluded_ranges,
                               lines=lines, f_range=f_range, hydrodynamics=hydrodynamics,
                               likelihood=likelihood)
-    res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
-                     plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
-                     _flag("robust", robust))
+    try:
+        res = _calibrate(plan.recordings, method, plan.model, k, likelihood, n_blocks,
+                         plan.f_range, diffusion, pade, start, strict, plan.fixed, plan.excluded,
+                         _flag("robust", robust))
+    except FitError as err:  # a band the caller chose is a cause the frames cannot show
+        raise FitError(str(err) + band_sentence(recs, f_range, excluded_ranges)) from err
     res = finish_instrument(res, plan).with_inputs(plan.recordings, plan.model,
                                                    plan.f_range, plan.excluded)
     data_notes += tuple(physics_notes(recs, radii, res, plan))

@@ -95,6 +95,28 @@ def _check_band_ordinates(recs, lo: float, hi: float) -> None:
                      f"{_MIN_BAND_ORDINATES}{khz}")
 
 
+def band_sentence(recs, f_range, excluded) -> str:
+    """Names the band a failed spectral fit was confined to by the caller's `f_range` and
+    `excluded` ranges [Hz] (a narrow band away from the corner frequency leaves k and gamma
+    unidentified, which the frames alone cannot show); empty without either."""
+    if f_range is None and not excluded:
+        return ""
+    kept = total = 0
+    for r in recs:
+        t = r.n_frames * float(r.frame_interval)
+        f = np.arange(1, r.n_frames // 2 + 1) / t
+        keep = np.ones(f.size, bool) if f_range is None else (f >= f_range[0]) & (f <= f_range[1])
+        for a, b in excluded or ():
+            keep &= ~((f >= a) & (f <= b))
+        kept, total = kept + int(keep.sum()), total + f.size
+    band = [f"f_range = ({f_range[0]:g}, {f_range[1]:g}) Hz"] if f_range is not None else []
+    band += [f"excluded_ranges = {[(float(a), float(b)) for a, b in excluded]} Hz"] if excluded else []
+    return (f" The fit was confined to {' and '.join(band)}: {kept} of the {total} periodogram "
+            "ordinates. k and gamma are identified by the band around the corner frequency "
+            "k/(2 pi gamma) and eps^2 by the highest frequencies: widen f_range (or leave "
+            "it out) and exclude only narrow bands.")
+
+
 def _check_diffusion(method, diffusion, pade):
     """A given D [m^2/s] is finite, > 0 and plausible, and only for equipartition/auto;
     ``pade=True`` needs it."""

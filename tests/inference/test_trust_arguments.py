@@ -231,3 +231,24 @@ def test_clean_informative_trace_gets_a_neutral_list():
     why = ref_mod._singular_fisher_causes([_rec(y)], np.array([5e-5, GAMMA, 1e-18]),
                                           ("k", "gamma", "tracking_var"))
     assert "a step or drift" in why and "dt >> tau" not in why
+
+
+@pytest.mark.parametrize("kw, band, kept", [
+    (dict(f_range=(100.0, 200.0)), r"f_range = \(100, 200\) Hz", 273),
+    (dict(f_range=(100.0, 200.0), excluded_ranges=[(150.0, 160.0)]),
+     r"f_range = \(100, 200\) Hz and excluded_ranges = \[\(150\.0, 160\.0\)\] Hz", 273 - 27)])
+def test_a_failed_fit_names_the_band_the_caller_confined_it_to(rec, monkeypatch, kw, band, kept):
+    """A band chosen by the caller (100-200 Hz, far below f_c ~ 300 Hz: k and gamma not
+    identified) is a cause the frames cannot show: the refusal names it, with the ordinates
+    it kept (counted here: j/T in the band, T = 4096/1500 s, j = 274..546; 150-160 Hz holds
+    j = 410..436)."""
+    def refuse(*a, **k):
+        raise FitError("likelihood fit: the Fisher information is singular")
+
+    monkeypatch.setattr(cal_mod, "_calibrate", refuse)
+    with pytest.raises(FitError, match=rf"singular The fit was confined to {band}: {kept} of the 2048 "
+                                       r"periodogram ordinates\. .*widen f_range"):
+        bt.calibrate(rec, method="psd", **kw)
+    monkeypatch.setattr(cal_mod, "_calibrate", refuse)
+    with pytest.raises(FitError, match=r"singular$"):  # without a band of the caller's, nothing is added
+        bt.calibrate(rec, method="psd")
