@@ -58,6 +58,8 @@ class Plan:
     #: active calibration: (|r|, se, f_d, exposure, index of the driven recording)
     drive: tuple | None = None
     unit: str = "m"
+    #: "camera", "photodiode" or None: the detector the argument or the recordings declare
+    detector: str | None = None
 
 
 def _settings(rec) -> dict:
@@ -285,4 +287,5 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
                              gamma_known=gamma_known, band=rng, excluded=excluded, drive=drive,
                              likelihood=likelihood)
     return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
-                notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit)
+                notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit,
+                detector=detector if detector is not None else st["detector"])

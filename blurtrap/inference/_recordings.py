@@ -175,14 +175,57 @@ def exposure_notes(res, plan) -> list:
         return []
     a = w0 / tau
     shift = _blur_b(1.1 * a) / _blur_b(a) - 1.0
+    out = _point_sampling_note(res, plan, w0, a)
     if shift * k < _EXPOSURE_SE * k_err:
-        return []
-    return [f"k and gamma rest on the declared exposure W = {w0 * 1e3:.4g} ms (W/tau = "
+        return out
+    return out + [f"k and gamma rest on the declared exposure W = {w0 * 1e3:.4g} ms (W/tau = "
             f"{a:.3g}): the frames cannot tell a longer exposure from less tracking noise (the "
             "same likelihood for any W, eps^2 taking the difference), and k, gamma scale as "
             "B(W/tau) = 2 (cosh(W/tau) - 1)/(W/tau)^2: an exposure 10 % longer than declared "
             f"gives k and gamma {shift * 100:.2g} % larger ({shift * k / k_err:.2g} SE). Check "
             "the camera's exposure (integration) time; with several exposures W is identified"]
+
+
+def _point_sampling_note(res, plan, w0: float, a: float) -> list:
+    """A photodiode declared to integrate over W whose fitted eps^2 rests on it: a
+    point-sampling ADC (W' = 0) explains the same frames with less tracking noise. The
+    frames fix ``C(0) = kT/k S(a) + eps^2`` and ``kT/k B(a)``, so eps^2 at another exposure
+    W' is ``C(0) - kT/k B(a) S(a')/B(a')`` and k is ``k B(a')/B(a)``; the note gives both
+    at W' = 0, or at the W' where eps^2 = 0. An independent pass: point samples declared
+    W = dt gave eps^2 = (1.7 nm)^2, 58 SE above its true 0, and k 2 SE off at dt = tau/2,
+    with no note."""
+    from ..physics import BOLTZMANN, blur_factor_unchecked
+
+    names = list(res.param_names)
+    if plan.detector != "photodiode" or plan.volts or "tracking_var" not in names:
+        return []
+    i = names.index("tracking_var")
+    eps2, eps2_err = float(res.values[i]), math.sqrt(abs(float(res.covariance[i, i])))
+    if not (math.isfinite(eps2_err) and eps2 > 3.0 * eps2_err):
+        return []
+    k = float(res.k)
+    var = BOLTZMANN * float(res.temperature) / k  # kT/k at the declared exposure
+    c0, big_a = eps2 + var * float(blur_factor_unchecked(np.float64(a))), var * _blur_b(a)
+    eps2_point = c0 - big_a  # eps^2 of point samples (W' = 0)
+    if eps2 - eps2_point < 3.0 * eps2_err:  # the declared exposure hardly matters to eps^2
+        return []
+    w_at = 0.0  # the exposure of the reading given: point samples, or eps^2 = 0 at W' in (0, W)
+    if eps2_point < 0:
+        lo, hi = 0.0, a  # S/B falls from 1 at 0: the W' where eps^2 = 0, by bisection
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            s_b = float(blur_factor_unchecked(np.float64(mid))) / _blur_b(mid)
+            lo, hi = (mid, hi) if s_b > c0 / big_a else (lo, mid)
+        w_at = hi
+    k_at = k * (_blur_b(w_at) if w_at > 0 else 1.0) / _blur_b(a)  # the same kT/k B
+    alt = (f"by point samples (W -> 0) with eps^2 = {eps2_point * 1e18:.3g} nm^2" if w_at == 0 else
+           f"by an exposure of {w_at / a * w0 * 1e3:.3g} ms and no tracking noise")
+    return [f"eps^2 = {eps2 * 1e18:.3g} nm^2 ({eps2 / eps2_err:.2g} SE above 0) rests on the photodiode "
+            f"integrating over the declared exposure W = {w0 * 1e3:.4g} ms: the same frames are described "
+            f"as well {alt} (k = {k_at * 1e3:.4g} pN/nm, {(k_at / k - 1) * 100:+.2g} %, "
+            f"{(k_at - k) / float(res.k_err):+.2g} SE): the frames cannot tell a shorter exposure from "
+            "more tracking noise. An ADC that samples points does not integrate over the frame interval: "
+            "declare the time it averages over (e.g. 1 % of the frame interval for a sample-and-hold)"]
 
 
 def _drive_friction_note(res, gamma_known) -> str:
