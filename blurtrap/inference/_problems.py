@@ -34,12 +34,34 @@ from ._whittle_pass import spectral_newton_plan as spectral_newton_plan
 K_MODES = ("shared", "per_recording", "per_power", "linear_power")
 
 
+class Labels(tuple):
+    """Parameter names that compare (and hash) by their structure only: a k label's
+    bracket (``k[P=12 mW]``, ``k[bead 3]``) counts as ``k[]``. The names are static fields
+    of :class:`Layout` that no traced computation reads (only their number), so a new set of
+    laser powers or recording names reuses the compiled fits of the same structure instead
+    of compiling them again (2-7 s each). Never use one as a dict key across layouts."""
+
+    def _key(self):
+        return tuple(n.split("[", 1)[0] + "[]" if "[" in n else n for n in self)
+
+    def __eq__(self, other):
+        return isinstance(other, tuple) and len(self) == len(other) and \
+            self._key() == Labels._key(other)
+
+    def __ne__(self, other):
+        return not self == other
+
+    def __hash__(self):
+        return hash(self._key())
+
+
 class Layout(eqx.Module):
     k_index: jax.Array  # per recording: which k parameter (unused for linear_power)
     power: jax.Array  # per recording laser power [W] (linear_power only)
     n_k: int = eqx.field(static=True)
     linear_power: bool = eqx.field(static=True)
     noise: bool = eqx.field(static=True)
+    #: display names (:class:`Labels`: equal across laser powers, so no recompilation)
     names: tuple = eqx.field(static=True)
     k_labels: tuple = eqx.field(static=True)
     extra_names: tuple = eqx.field(static=True, default=())
@@ -94,8 +116,8 @@ def make_layout(recordings, k_mode: str, noise: bool, extra_names: tuple = ()) -
         n_k=len(labels),
         linear_power=linear,
         noise=noise,
-        names=names,
-        k_labels=labels,
+        names=Labels(names),
+        k_labels=Labels(labels),
     )
 
 

@@ -208,3 +208,27 @@ def test_design_compiles_its_optimiser_once_for_every_series_and_budget(compiles
     compiles.reset()
     bt.design(k=(5e-5, 5e-4), total_time=30.0, series=(2, 3), **common)
     assert [n for n in compiles.names if n.startswith(("jit(_minimise_all", "jit(_evaluate"))] == []
+
+
+def _power_set(powers, seed, n_frames=4096):
+    ys = camera(5e-5, n_frames, seed, n_traces=len(powers))
+    return [bt.Recording(y, frame_interval=DT, exposure=DT, laser_power=p) for y, p in zip(ys, powers)]
+
+
+@pytest.mark.parametrize("kw", [dict(likelihood="whittle"), dict(method="psd", n_blocks=4),
+                                dict(likelihood="exact")])
+def test_a_new_set_of_laser_powers_compiles_nothing_and_keeps_its_labels(compiles, kw):
+    """k per power: a second trap at other laser powers (the k labels ``k[P=12 mW]`` are
+    static fields of the layout) reuses the compiled fit, and every name in the result is
+    its own powers', not the first set's."""
+    first = bt.calibrate(_power_set((0.01, 0.02, 0.04), 1), k="per_power", **kw)
+    assert first.param_names[:3] == ("k[P=10 mW]", "k[P=20 mW]", "k[P=40 mW]")
+    compiles.reset()
+    res = bt.calibrate(_power_set((0.012, 0.025, 0.05), 2), k="per_power", **kw)
+    assert compiles.names == [], compiles.names
+    labels = ("k[P=12 mW]", "k[P=25 mW]", "k[P=50 mW]")
+    assert res.param_names[:3] == labels
+    assert tuple(res.to_dict()["param_names"])[:3] == labels
+    assert set(labels) <= set(res.intervals)
+    assert all(lab in res.summary() for lab in labels)
+    assert not any(old in res.summary() + " ".join(res.notes) for old in ("P=10 mW", "P=20 mW", "P=40 mW"))
