@@ -20,7 +20,7 @@ from ._instrument import prepare_instrument
 from ._irregular import any_irregular, rounding_notes
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
-from ._options import _check_options, _flag, band_sentence
+from ._options import _check_options, _default_k_mode, _flag, band_sentence
 from ._problems import make_layout
 from ._recordings import _bead_radii, as_recordings, misfit_note, physics_notes
 from ._refusals import _check_psd_blocks, _no_temporal_information_message, known_friction_message
@@ -155,14 +155,6 @@ def calibrate(
     if notes:
         res = dataclasses.replace(res, notes=tuple(res.notes) + notes)
     return res
-
-
-def _default_k_mode(recs):
-    """One k per laser power when the recordings' powers differ, else one shared k."""
-    powers = [r.laser_power for r in recs]
-    if all(p is not None for p in powers) and len({float(p) for p in powers}) > 1:
-        return "per_power"
-    return "shared"
 
 
 def _calibrate(recs, method, mdl, k, likelihood, n_blocks, f_range, diffusion, pade, start,

@@ -189,3 +189,16 @@ def frequency_pair(pair, what):
         raise ValueError(f"{what} must satisfy 0 <= f_low < f_high (finite, Hz); got "
                          f"{what} = ({lo!r}, {hi!r})")
     return lo, hi
+
+
+def _default_k_mode(recs):
+    """One k per laser power when the recordings' powers differ, else one shared k."""
+    powers = [r.laser_power for r in recs]
+    missing = [i for i, p in enumerate(powers) if p is None]
+    if missing and len(missing) < len(recs):  # a slip: the declared powers would be dropped
+        raise ValueError(f"laser_power is given on recordings {[i for i in range(len(recs)) if i not in missing]} "
+                         f"but missing on recordings {missing}: give every recording's laser_power (one k "
+                         "per power), or fit one k to all (k='shared'; --k-mode shared on the command line)")
+    if not missing and len({float(p) for p in powers}) > 1:
+        return "per_power"
+    return "shared"

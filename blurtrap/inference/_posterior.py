@@ -40,9 +40,10 @@ from typing import Any
 import numpy as np
 
 from .._config import float64_scope
-from ._calibrate import _default_k_mode, calibrate
+from ._calibrate import calibrate
 from ._log_posterior import _compiled_log_posterior, _PostArgs
 from ._models import get_model
+from ._options import _default_k_mode
 from ._pointwise import Pointwise, exact_pointwise, spectral_pointwise
 from ._posterior_priors import _check_user_priors, _resolve_priors, check_prior_units, prior_conflict_notes
 from ._posterior_result import Posterior, _derived

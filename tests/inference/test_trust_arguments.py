@@ -252,3 +252,14 @@ def test_a_failed_fit_names_the_band_the_caller_confined_it_to(rec, monkeypatch,
     monkeypatch.setattr(cal_mod, "_calibrate", refuse)
     with pytest.raises(FitError, match=r"singular$"):  # without a band of the caller's, nothing is added
         bt.calibrate(rec, method="psd")
+
+
+def test_a_laser_power_missing_on_some_recordings_is_named(rec):
+    """Powers on recordings 0 and 2 but not on 1: the default k mode used to fall back to one
+    shared k, dropping the declared powers; the recording without one is named."""
+    recs = [bt.Recording(_trace(seed=4 + i)[0], frame_interval=DT, exposure=1e-5, laser_power=p)
+            for i, p in enumerate((0.25, None, 1.0))]
+    with pytest.raises(ValueError, match=r"laser_power is given on recordings \[0, 2\] but missing on "
+                                         r"recordings \[1\]: give every recording's laser_power"):
+        bt.calibrate(recs)
+    assert bt.calibrate(recs, k="shared").param_names[0] == "k"
