@@ -275,7 +275,7 @@ CLI_BAD_INPUTS = [
     (["calibrate", "{tmp}/sim/manifest.json", "--k-mode", "linear_power"], "laser_power"),
     (["diagnose", "{tmp}/sim/manifest.json", "--add", "nonsense"], "unknown effect"),
     (["calibrate", "{tmp}/sim/manifest.json", "--f-range", "100", "5000"],
-     "f_max = 5000 Hz is above the Nyquist"),
+     "FMAX = 5000 Hz is above the Nyquist"),
     (["calibrate", "{tmp}/sim/manifest.json", "--method", "psd", "--f-range", "0", "750.5"],
      "above the Nyquist"),
     (["diagnose", "{tmp}/sim/manifest.json", "--alpha", "1.5"], "alpha .* 1.5"),

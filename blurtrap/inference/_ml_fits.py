@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import float64_scope
+from . import _noise_pooling
 from ._assemble import _assemble, _interval_source, _k_mode_of
 from ._fit import chi2_sf, fit_ml, fit_ml_fd_newton
 from ._fixed import expand as expand_fixed
@@ -44,7 +45,7 @@ def _fit_spectral(recs, layout, model, n_blocks, f_range, method_name, notes, st
     psd = _psd_jit(out.value, args)
     gof = spectral_gof(args.power / psd, args.weight, len(layout.names))
     notes = [*notes, *_pooling_notes(recs, layout, model, args, psd, out.nll, gof["p_value"],
-                                     fixed, f_range, excluded)]
+                                     fixed, f_range, excluded, fit=(out.value, out.cov))]
     if fixed:
         note = held_consistency_note(spectral_nll, args, out.value, scale, layout.names, fixed,
                                      eqx.tree_at(lambda a: a.power, args, psd),
@@ -103,7 +104,7 @@ def shared_k_note(layout, ratio, weight, gof_p) -> str | None:
 
 
 def _pooling_notes(recs, layout, model, args, psd, whittle_nll, gof_p, fixed, f_range=None,
-                   excluded=None) -> list[str]:
+                   excluded=None, fit=None) -> list[str]:
     """The joint fit's notes on what its recordings share, when its goodness of fit
     ``gof_p`` fails: :func:`shared_k_note`'s spectral test for k and the shared parameters
     the recordings' own fits disagree on (:mod:`._pooling`; the first dropped when the own
@@ -120,7 +121,9 @@ def _pooling_notes(recs, layout, model, args, psd, whittle_nll, gof_p, fixed, f_
         other = pooling_note(found, k_note is not None, recs)
     power = None if whittle_nll is None else \
         power_law_note(recs, layout, model, args, whittle_nll, gof_p, fixed)
-    return [n for n in ("; ".join(n for n in (k_note, other) if n), power) if n]
+    noise = None if fit is None or (other and "tracking error differs" in other) else \
+        _noise_pooling.noise_note(layout, args, *fit, fixed)
+    return [n for n in ("; ".join(n for n in (k_note, other) if n), power, noise) if n]
 
 
 def power_law_note(recs, layout, model, args, nll_value, gof_p, fixed) -> str | None:
@@ -265,7 +268,7 @@ def _fit_exact(recs, layout, model, notes, fixed=None):
         extras.update(ratios)
     notes = [*notes, *_pooling_notes(recs, layout, model, sargs, psd,
                                      wout.nll if bool(wout.success) else None,
-                                     gof["p_value"], fixed)]
+                                     gof["p_value"], fixed, fit=(out.value, out.cov))]
     if fixed:
         note = held_consistency_note(nll, args, out.value, moment, names, fixed,
                                      eqx.tree_at(lambda a: a.power, sargs, psd),

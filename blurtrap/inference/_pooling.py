@@ -18,7 +18,9 @@ import math
 import numpy as np
 
 from ._fit import chi2_sf, fit_ml
+from ._frames import temporal_information
 from ._problems import make_layout, spectral_nll
+from ._refusals import _unidentified
 from ._spectral import _spectral_args
 from ._starts import _start_vector
 
@@ -45,7 +47,10 @@ _JOINT_ONLY = ("power_offset", "heating")
 
 def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None):
     """Each recording fitted alone: a list of ``{name: (value, se)}`` (names of a single
-    recording's layout: ``k``, ``gamma``, ...), ``None`` for a fit that did not converge.
+    recording's layout: ``k``, ``gamma``, ...), ``None`` for a fit that did not converge or
+    that ``calibrate`` would refuse (frames without temporal information, k or gamma not
+    identified: an independent pass found a note quoting such a recording's eps^2 as
+    27.39 +- 0.39 nm^2 against a true 7.84).
     Held parameters stay held (their entries are left out)."""
     from ._ml_fits import _fit_held  # _ml_fits imports this module
 
@@ -53,6 +58,9 @@ def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None
         return [None] * len(recs)
     out = []
     for r in recs:
+        if not temporal_information(r)[0]:  # calibrate refuses such a recording alone
+            out.append(None)
+            continue
         lay = make_layout([r], "shared", layout.noise, layout.extra_names)
         args = _spectral_args([r], lay, model, 1, f_range, excluded)
         try:
@@ -63,7 +71,8 @@ def alone_estimates(recs, layout, model, f_range=None, excluded=None, fixed=None
             continue
         # a fit whose errors are conditional on a bound (too small), or that misfits its
         # own recording (a misfit shared by all moves each differently), tests nothing here
-        if not bool(res.converged) or res.conditional or _own_gof(res.value, args) < POOL_ALPHA:
+        if not bool(res.converged) or res.conditional or _unidentified(res, lay.names) or \
+                _own_gof(res.value, args) < POOL_ALPHA:
             out.append(None)
             continue
         val, se = np.asarray(res.value, float), np.sqrt(np.abs(np.diag(np.asarray(res.cov))))
