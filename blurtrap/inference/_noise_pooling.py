@@ -102,6 +102,8 @@ def noise_heterogeneity(layout, args, value, cov, fixed, n_iter: int = 30) -> di
     ie, nf = [n for _, n in free].index("tracking_var"), len(free)
     delta = np.zeros(n_rec - 1)
     nll0, score, info = _enlarged_pass(p, delta, args, free, ie, n_rec)
+    if score is None or info is None:
+        return None
     nll, q, dl = nll0, p, delta
     try:
         for _ in range(n_iter):
@@ -115,6 +117,7 @@ def noise_heterogeneity(layout, args, value, cov, fixed, n_iter: int = 30) -> di
             else:
                 break
             done = nll - nll_new < 1e-8 * max(1.0, abs(nll))
+            assert score_new is not None and info_new is not None  # a finite nll has them
             q, dl, nll, score, info = q_new, dl_new, nll_new, score_new, info_new
             if done:
                 break
