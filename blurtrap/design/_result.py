@@ -68,8 +68,23 @@ class DesignResult:
 
     def to_dict(self) -> dict:
         return {"target": self.target, "k_N_per_m": list(self.k), "settings": self.settings,
+                "notes": list(self.notes),
                 "best": self.best.to_dict(),
                 "candidates": [c.to_dict() for c in self.candidates]}
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the predicted SEs assume that ``calibrate`` does not do (photon-limited
+        noise across exposures)."""
+        exposures = {round(float(r[1]), 15) for r in self.best.recordings}
+        if not (self.settings.get("photon_limited") and len(exposures) > 1):
+            return ()
+        return ("photon-limited: the SEs assume a fit that knows eps^2 = eps_ref^2 W_ref/W across "
+                "the recordings (one noise parameter for the whole series). calibrate fits one eps^2 "
+                "shared by all recordings, which a photon-limited series violates: its joint fit of "
+                "the recommended series is biased, its note refits one eps^2 per recording with "
+                "larger errors, and neither reaches these SEs (benchmarks/study_design.py reached "
+                "them with a joint likelihood of eps^2 ~ 1/W written there)",)
 
     def summary(self) -> str:
         extra = self.target not in ("k", "gamma")
@@ -112,4 +127,4 @@ class DesignResult:
                         "; @pP: at p times the laser power k is given at, SE k of a power "
                         "series = SE of c in k = c P, calibrate(k='linear_power')")
                      + ")")
-        return "\n".join(lines)
+        return "\n".join(lines + [f"note: {n}" for n in self.notes])

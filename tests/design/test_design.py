@@ -90,6 +90,11 @@ def test_design_recommends_the_best_candidate_and_beats_w_equal_dt():
         assert sum(dt * nf for dt, _, nf in c.recordings) == pytest.approx(30.0, rel=1e-6)
     assert set(r.predicted_se) == {"k", "gamma", "tracking_var"}
     assert "recommended" in r.summary()
+    # an independent pass fitted such a recommendation with calibrate (one shared eps^2):
+    # k 0.04 x the truth; the summary says what the SEs assume
+    assert len({w for _, w, _ in r.best.recordings}) > 1
+    assert r.notes and "calibrate fits one eps^2 shared by all recordings" in r.notes[0]
+    assert r.notes[0] in r.summary() and r.to_dict()["notes"] == list(r.notes)
     assert r.to_dict()["best"]["label"] == r.best.label
 
 
