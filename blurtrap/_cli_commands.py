@@ -82,7 +82,8 @@ def calibrate_command(args) -> int:
 
         if not args.json:
             print("sampling the posterior (emcee)...", file=sys.stderr)
-        post = sample_posterior(str(path), model=args.model, n_steps=args.steps,
+        steps = args.steps if args.steps is not None else "auto"
+        post = sample_posterior(str(path), model=args.model, n_steps=steps,
                                 n_walkers=args.walkers, k=kw.get("k"),
                                 progress=not args.json and sys.stderr.isatty())
     if report is not None:

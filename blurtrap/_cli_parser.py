@@ -169,8 +169,9 @@ def _add_calibrate_parser(sub):
                         "fallback of --method auto when frames carry no temporal information")
     c.add_argument("--posterior", action="store_true",
                    help="also sample the posterior with emcee (medians, 68 %%/95 %% intervals)")
-    c.add_argument("--steps", type=_int_at_least(10), default=2000, metavar="N",
-                   help="emcee steps for --posterior (>= 10; default 2000)")
+    c.add_argument("--steps", type=_int_at_least(10), default=None, metavar="N",
+                   help="emcee steps for --posterior (>= 10; default: 2000, extended until the "
+                   "chain holds 50 autocorrelation times, at most 20000)")
     c.add_argument("--walkers", type=_int_at_least(2, even=True), default=32, metavar="N",
                    help="emcee walkers for --posterior (even, >= 2 x the number of "
                    "parameters; default 32)")

@@ -19,13 +19,14 @@ MIN_RATE_HZ = 2000.0
 
 
 def detector_mismatch_note(res, plan) -> list:
-    """The note when an anti-aliased photodiode model fits far worse than the folded one."""
+    """The note when an anti-aliased photodiode model, implied by the detector settings (not
+    a model given: diagnose compares the two itself), fits far worse than the folded one."""
     from ._ml_fits import screen_model
     from ._models import TrapModel
 
     mdl = plan.model
     recs = plan.recordings
-    if mdl.blur or mdl.alias or mdl.extra or not mdl.noise or res.method != "likelihood":
+    if plan.model_given or mdl.blur or mdl.alias or mdl.extra or not mdl.noise or res.method != "likelihood":
         return []
     if min(1.0 / float(r.frame_interval) for r in recs) < MIN_RATE_HZ:
         return []

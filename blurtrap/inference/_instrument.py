@@ -60,6 +60,8 @@ class Plan:
     unit: str = "m"
     #: "camera", "photodiode" or None: the detector the argument or the recordings declare
     detector: str | None = None
+    #: the model was given (not implied by the detector settings)
+    model_given: bool = False
 
 
 def _settings(rec) -> dict:
@@ -288,4 +290,4 @@ def prepare_instrument(recs, model, model_given, method, *, fixed=None, friction
                              likelihood=likelihood)
     return Plan(recordings=cleaned, model=mdl, fixed=held, f_range=rng, excluded=excluded,
                 notes=notes, volts=volts, gamma_known=gamma_known, drive=drive, unit=unit,
-                detector=detector if detector is not None else st["detector"])
+                detector=detector if detector is not None else st["detector"], model_given=model_given)

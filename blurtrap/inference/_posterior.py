@@ -30,10 +30,8 @@ emcee is imported inside :func:`sample_posterior` only (``import blurtrap`` stay
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
 import time
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -45,6 +43,8 @@ from ._log_posterior import _compiled_log_posterior, _PostArgs
 from ._models import get_model
 from ._options import _default_k_mode
 from ._pointwise import Pointwise, exact_pointwise, spectral_pointwise
+from ._posterior_chain import ShortChainWarning as ShortChainWarning
+from ._posterior_chain import burn_in_and_tau, run_emcee
 from ._posterior_priors import _check_user_priors, _resolve_priors, check_prior_units, prior_conflict_notes
 from ._posterior_result import Posterior, _derived
 from ._priors import LogUniform, Uniform
@@ -59,11 +59,6 @@ from ._whittle_closed import (
     _rational_ok,
     _RationalWhittleArgs,
 )
-
-
-class ShortChainWarning(UserWarning):
-    """The chain is shorter than ~50 integrated autocorrelation times: the interval
-    estimates are noisy; run more steps."""
 
 
 # ------------------------------------------------------------------------------------------
@@ -108,18 +103,6 @@ def _initial_ball(rng, theta_ml, cov_theta, n_walkers, init_scale):
         chol = np.eye(d) * 1e-2
     z = rng.standard_normal((n_walkers, d))
     return theta_ml[None, :] + init_scale * z @ chol.T, chol
-
-
-def _integrated_time(emcee, chain) -> np.ndarray:
-    """emcee's integrated autocorrelation time per parameter (quiet: its too-short-chain
-    message is logged by emcee; :class:`ShortChainWarning` reports it once instead)."""
-    logger = logging.getLogger("emcee.autocorr")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    try:
-        return np.asarray(emcee.autocorr.integrated_time(chain, quiet=True), dtype=float)
-    finally:
-        logger.setLevel(level)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -199,13 +182,17 @@ def _setup(data, model, priors, n_walkers, likelihood, k, f_range) -> _Setup:
 # ------------------------------------------------------------------------------------------
 # the emcee run
 # ------------------------------------------------------------------------------------------
-def _check_run_args(likelihood, n_walkers, n_steps, init_scale) -> tuple[int, int, float]:
+def _check_run_args(likelihood, n_walkers, n_steps, init_scale) -> tuple[int, int | str, float]:
     """Validate the sampler arguments (before any fit); return them as int, int, float."""
     if likelihood not in ("whittle", "exact"):
         raise ValueError(f"likelihood must be 'whittle' or 'exact'; got {likelihood!r}")
-    n_walkers, n_steps = int(n_walkers), int(n_steps)
-    if n_steps < 10:
-        raise ValueError(f"n_steps must be >= 10; got {n_steps}")
+    if n_steps != "auto":
+        if isinstance(n_steps, (str, bool)) or int(n_steps) != n_steps:
+            raise ValueError(f"n_steps must be 'auto' or an integer >= 10; got n_steps = {n_steps!r}")
+        n_steps = int(n_steps)
+        if n_steps < 10:
+            raise ValueError(f"n_steps must be >= 10; got {n_steps}")
+    n_walkers = int(n_walkers)
     ok = isinstance(init_scale, (int, float, np.integer, np.floating)) and not isinstance(
         init_scale, (bool, np.bool_))
     if not (ok and math.isfinite(float(init_scale)) and 0.0 < float(init_scale) <= 1.0):
@@ -250,43 +237,6 @@ def _start_walkers(rng, su: _Setup, n_walkers: int, init_scale: float):
     return theta0, lp0
 
 
-def _run_emcee(emcee, log_prob, theta0, lp0, rng, n_steps: int, progress: bool):
-    """Run emcee's ensemble sampler (``vectorize=True``) from ``theta0``, seeded from ``rng``;
-    return the sampler and the sampling time."""
-    n_walkers, ndim = theta0.shape
-    rstate = np.random.RandomState(int(rng.integers(0, 2**32 - 1)))
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
-    state = emcee.State(theta0, log_prob=lp0, random_state=rstate.get_state())
-    t0 = time.perf_counter()
-    sampler.run_mcmc(state, n_steps, progress=progress)
-    return sampler, time.perf_counter() - t0
-
-
-def _burn_in_and_tau(emcee, chain, n_steps: int, burn_in) -> tuple[int, np.ndarray]:
-    """The burn-in (default ``max(3 tau_max, n_steps / 10)``, at most half) and the
-    integrated autocorrelation times of the kept chain; warns when the chain is short."""
-    tau_full = _integrated_time(emcee, chain)
-    tau_max = float(np.nanmax(tau_full)) if np.any(np.isfinite(tau_full)) else float(n_steps)
-    if burn_in is None:
-        burn = max(int(math.ceil(3.0 * tau_max)), int(math.ceil(0.1 * n_steps)))
-        burn = min(burn, n_steps // 2)
-    else:
-        burn = int(burn_in)
-        if not 0 <= burn < n_steps:
-            raise ValueError(f"burn_in must be in [0, n_steps); got {burn_in!r}")
-    tau = _integrated_time(emcee, chain[burn:])
-    tau_chk = float(np.nanmax(np.maximum(tau, tau_full)))
-    if n_steps < 50.0 * tau_chk:
-        warnings.warn(
-            f"the chain ({n_steps} steps) is shorter than 50 integrated autocorrelation "
-            f"times (tau_max = {tau_chk:.3g} steps): intervals are noisy; use n_steps >= "
-            f"{int(math.ceil(50 * tau_chk))}",
-            ShortChainWarning,
-            stacklevel=4,  # the caller of sample_posterior (through float64_scope)
-        )
-    return burn, tau
-
-
 # ------------------------------------------------------------------------------------------
 # entry point
 # ------------------------------------------------------------------------------------------
@@ -297,7 +247,7 @@ def sample_posterior(
     model=None,
     priors=None,
     n_walkers: int = 32,
-    n_steps: int = 2000,
+    n_steps: int | str = "auto",
     seed: int = 0,
     progress: bool = False,
     likelihood: str = "whittle",
@@ -322,7 +272,9 @@ def sample_posterior(
       (JAX-traceable; ``params`` maps ``layout.names`` to SI values; density in the natural
       parameters) are given as ``priors=f``, a list of functions, or under the key
       ``"log_prior"``; they add to the per-parameter priors.
-    - `n_walkers`: even, >= 2 x the number of parameters. `n_steps`: steps per walker.
+    - `n_walkers`: even, >= 2 x the number of parameters. `n_steps`: steps per walker, or
+      ``"auto"`` (default): 2000, extended until the chain holds 50 integrated
+      autocorrelation times (at most 20 000).
     - `seed`: seeds ``np.random.default_rng(seed)``, which draws the initial ball and seeds the
       ``RandomState`` handed to emcee (no global RNG state is used or changed).
     - `progress`: emcee's progress bar.
@@ -340,7 +292,8 @@ def sample_posterior(
 
     **Returns:** :class:`Posterior`.
 
-    **Warns:** :class:`ShortChainWarning` when ``n_steps < 50 tau_max``.
+    **Warns:** :class:`ShortChainWarning` when ``n_steps < 50 tau_max`` (with ``"auto"``:
+    after 20 000 steps).
 
     **Raises:** ``ValueError`` for bad arguments or a start outside the prior's support;
     ``TypeError`` for a user log-prior that is not JAX-traceable (checked before any fit);
@@ -353,12 +306,12 @@ def sample_posterior(
     t_compile = _compile_both_shapes(su.log_prob, su.theta_start, n_walkers)
     rng = np.random.default_rng(seed)
     theta0, lp0 = _start_walkers(rng, su, n_walkers, init_scale)
-    sampler, t_sample = _run_emcee(emcee, su.log_prob, theta0, lp0, rng, n_steps, progress)
+    sampler, n_steps, t_sample = run_emcee(emcee, su.log_prob, theta0, lp0, rng, n_steps, progress)
 
     # ---- diagnostics -------------------------------------------------------------------
     chain = np.asarray(sampler.get_chain())  # (n_steps, n_walkers, ndim) in theta
     lps = np.asarray(sampler.get_log_prob())
-    burn, tau = _burn_in_and_tau(emcee, chain, n_steps, burn_in)
+    burn, tau = burn_in_and_tau(emcee, chain, n_steps, burn_in)
     kept = chain[burn:]
     ess = n_walkers * kept.shape[0] / tau
     chain_nat = np.exp(kept)
