@@ -354,3 +354,32 @@ def test_interval_coverage():
         z = np.asarray(z)
         assert abs(np.mean(z)) < 4 / math.sqrt(n), (name, np.mean(z))
         assert abs(np.std(z, ddof=1) - 1.0) < 4 / math.sqrt(2 * n), (name, np.std(z, ddof=1))
+
+
+def test_auto_length_extends_the_chain_until_50_autocorrelation_times(short_rec, monkeypatch):
+    """n_steps='auto' (the default): the run grows in chunks until it holds 50 integrated
+    autocorrelation times (an independent pass: the old default of 2000 steps warned on
+    every fit of a camera recording whose eps^2 sits near 0), up to its cap, then warns."""
+    import warnings
+
+    from blurtrap.inference import _posterior_chain as chain_mod
+
+    monkeypatch.setattr(chain_mod, "AUTO_FIRST_STEPS", 60)
+    monkeypatch.setattr(chain_mod, "AUTO_MAX_STEPS", 1000)
+    real = chain_mod._integrated_time
+    tau = {"value": 4.0}  # 50 x 4 = 200 steps needed: 60, then a chunk of at least 500
+
+    def fake(emcee, chain):
+        return np.full(np.shape(chain)[-1], tau["value"]) if np.shape(chain)[0] > 0 else real(emcee, chain)
+
+    monkeypatch.setattr(chain_mod, "_integrated_time", fake)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ShortChainWarning)
+        post = sample_posterior(short_rec, seed=1)
+    assert post.n_steps == 560 and post.log_prob.shape[0] + post.burn_in == 560
+    tau["value"] = 100.0  # 5000 steps needed: stops at the cap and says so
+    with pytest.warns(ShortChainWarning, match=r"chain \(1000 steps\)"):
+        post = sample_posterior(short_rec, seed=1)
+    assert post.n_steps == 1000
+    with pytest.raises(ValueError, match="n_steps must be 'auto' or an integer >= 10"):
+        sample_posterior(short_rec, n_steps="long")
