@@ -16,6 +16,7 @@ Outcome per case:
     python benchmarks/study_trust.py --fourth          # the fourth pass's (_trust_fourth.py)
     python benchmarks/study_trust.py --fifth           # the fifth pass's (_trust_fifth.py)
     python benchmarks/study_trust.py --sixth           # the sixth/seventh passes' (_trust_sixth.py)
+    python benchmarks/study_trust.py --eighth          # the eighth pass's (_trust_eighth.py)
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ import blurtrap as bt
 from blurtrap.inference import FitError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _trust_eighth import EXPECTED as EIGHTH_EXPECTED  # noqa: E402
+from _trust_eighth import eighth_pass_cases  # noqa: E402
 from _trust_fifth import EXPECTED as FIFTH_EXPECTED  # noqa: E402
 from _trust_fifth import fifth_pass_cases  # noqa: E402
 from _trust_fourth import EXPECTED as FOURTH_EXPECTED  # noqa: E402
@@ -266,7 +269,7 @@ EXPECTED = {  # the outcome each class must have; anything else is listed as a f
     "unused": "noted", "equipartition": "noted", "nonstationary": ("noted", "clear error"),
     "pooled": "noted", "duplicate": "clear error", "white frames": "clear error",
     "batch": "honest", **THIRD_EXPECTED, **FOURTH_EXPECTED, **FIFTH_EXPECTED,
-    **SIXTH_EXPECTED,
+    **SIXTH_EXPECTED, **EIGHTH_EXPECTED,
 }
 
 
@@ -283,13 +286,15 @@ def main(argv=None):
                     help="only the classes of the fifth independent pass (session 25)")
     ap.add_argument("--sixth", action="store_true",
                     help="only the classes of the sixth and seventh passes (session 26)")
+    ap.add_argument("--eighth", action="store_true",
+                    help="only the classes of the eighth pass (session 27)")
     a = ap.parse_args(argv)
     bt.enable_x64()
     t0 = time.time()
     rows = []
     gens = (offset_cases, detector_cases, unit_cases, batch_cases, json_cases,
             second_pass_cases, third_pass_cases, fourth_pass_cases, fifth_pass_cases,
-            sixth_pass_cases)
+            sixth_pass_cases, eighth_pass_cases)
     if a.second:
         gens = (second_pass_cases,)
     if a.third:
@@ -300,6 +305,8 @@ def main(argv=None):
         gens = (fifth_pass_cases,)
     if a.sixth:
         gens = (sixth_pass_cases,)
+    if a.eighth:
+        gens = (eighth_pass_cases,)
     for gen in gens:
         for name, res in gen():
             # the longest matching key: later passes name narrower classes

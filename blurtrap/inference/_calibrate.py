@@ -20,6 +20,7 @@ from ._instrument import prepare_instrument
 from ._irregular import any_irregular, rounding_notes
 from ._ml_fits import _LEAKAGE_INDEX_MAX, _fit_exact, _fit_spectral, _leakage_index
 from ._models import TrapModel, get_model
+from ._noise_pooling import without_drift_confusion
 from ._options import _check_options, _default_k_mode, _flag, band_sentence
 from ._problems import make_layout
 from ._recordings import _bead_radii, as_recordings, misfit_note, physics_notes
@@ -153,7 +154,7 @@ def calibrate(
     notes = tuple(plan.notes) + data_notes
     notes += tuple(misfit_note(res, tuple(res.notes) + notes))
     if notes:
-        res = dataclasses.replace(res, notes=tuple(res.notes) + notes)
+        res = dataclasses.replace(res, notes=without_drift_confusion(tuple(res.notes) + notes))
     return res
 
 

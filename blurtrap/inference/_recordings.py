@@ -219,6 +219,8 @@ def _point_sampling_note(res, plan, w0: float, a: float) -> list:
             lo, hi = (mid, hi) if s_b > c0 / big_a else (lo, mid)
         w_at = hi
     k_at = k * (_blur_b(w_at) if w_at > 0 else 1.0) / _blur_b(a)  # the same kT/k B
+    if eps2_point > 3.0 * eps2_err and abs(k_at - k) < 0.5 * float(res.k_err):
+        return []  # real tracking noise either way, and k hardly moves: the declaration stands
     alt = (f"by point samples (W -> 0) with eps^2 = {eps2_point * 1e18:.3g} nm^2" if w_at == 0 else
            f"by an exposure of {w_at / a * w0 * 1e3:.3g} ms and no tracking noise")
     return [f"eps^2 = {eps2 * 1e18:.3g} nm^2 ({eps2 / eps2_err:.2g} SE above 0) rests on the photodiode "
