@@ -15,6 +15,7 @@ import warnings
 import numpy as np
 
 from .._config import float64_scope
+from ._detector_check import detector_mismatch_note
 from ._frames import _inspect_frames, temporal_information
 from ._instrument import prepare_instrument
 from ._irregular import any_irregular, rounding_notes
@@ -150,7 +151,7 @@ def calibrate(
         raise FitError(str(err) + band_sentence(recs, f_range, excluded_ranges)) from err
     res = finish_instrument(res, plan).with_inputs(plan.recordings, plan.model,
                                                    plan.f_range, plan.excluded)
-    data_notes += tuple(physics_notes(recs, radii, res, plan))
+    data_notes += tuple(physics_notes(recs, radii, res, plan)) + tuple(detector_mismatch_note(res, plan))
     notes = tuple(plan.notes) + data_notes
     notes += tuple(misfit_note(res, tuple(res.notes) + notes))
     if notes:

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import math
 
+from ._ml_fits import screen_model
+from ._models import TrapModel
+
 #: the log-likelihood difference that names the folded model over the anti-aliased one (as
 #: diagnose's detector note: far beyond chance for non-nested models of equal size)
 DETECTOR_DLOGL = 10.0
@@ -21,9 +24,6 @@ MIN_RATE_HZ = 2000.0
 def detector_mismatch_note(res, plan) -> list:
     """The note when an anti-aliased photodiode model, implied by the detector settings (not
     a model given: diagnose compares the two itself), fits far worse than the folded one."""
-    from ._ml_fits import screen_model
-    from ._models import TrapModel
-
     mdl = plan.model
     recs = plan.recordings
     if plan.model_given or mdl.blur or mdl.alias or mdl.extra or not mdl.noise or res.method != "likelihood":

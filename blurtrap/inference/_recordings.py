@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 
 from .._config import warn_if_float32
-from ._detector_check import detector_mismatch_note
 
 
 def as_recordings(data: Any) -> list:
@@ -133,7 +132,7 @@ def physics_notes(recs, radii, res, plan) -> list:
     found k = 112 N/m and gamma 1e6 x Stokes with no note); not for volts through a known
     friction (gamma is the friction given). A friction given beside a drive is not used:
     the note says so and compares it with the fitted gamma."""
-    exposure = exposure_notes(res, plan) + detector_mismatch_note(res, plan)
+    exposure = exposure_notes(res, plan)
     if plan.volts and plan.drive is None:
         return exposure
     if plan.volts and plan.gamma_known is not None:
