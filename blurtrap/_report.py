@@ -124,13 +124,15 @@ def per_recording_table(fit, recs) -> list[str]:
 
 
 def recordings_table(recs) -> list[str]:
-    lines = ["| recording | frames | dt [ms] | W [ms] | T [K] | P [mW] | unit |",
+    lines = ["| recording | frames | dt [ms] | W [ms] | T [K] | P [mW] | positions |",
              "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(recs):
         p = "-" if r.laser_power is None else f"{r.laser_power * 1e3:.4g}"
+        meta = getattr(r, "metadata", None) or {}
+        read = str(meta.get("position_unit", "m")) if hasattr(meta, "get") else "m"
+        unit = "V" if r.position_unit == "V" else ("m" if read in ("m", "V") else f"m (read from {read})")
         lines.append(f"| {rf.label(r, i)} | {r.n_frames} | {r.frame_interval * 1e3:.6g} | "
-                     f"{float(r.exposure) * 1e3:.6g} | {float(r.temperature):g} | {p} | "
-                     f"{'V' if r.position_unit == 'V' else 'm'} |")
+                     f"{float(r.exposure) * 1e3:.6g} | {float(r.temperature):g} | {p} | {unit} |")
     return lines
 
 

@@ -290,3 +290,19 @@ def test_posterior_goes_into_the_report(manifest, tmp_path):
     assert "## Posterior (emcee)" in report and "posterior: k median 0.01 pN/nm" in report
     assert json.loads((tmp_path / "result.json").read_text())["posterior"]["k"] == 1e-5
     assert info["failed"] == [] and "spectrum_0.png" in info["files"]
+
+
+def test_recordings_table_says_the_unit_the_positions_were_read_from():
+    """A manifest in nm is loaded into metres: the table said "m" where the user's file holds
+    nm; it now says both."""
+    import numpy as np
+
+    import blurtrap as bt
+    from blurtrap._report import recordings_table
+
+    y = np.random.default_rng(0).standard_normal(4096) * 1e-8
+    nm = bt.Recording(y, frame_interval=1e-3, exposure=1e-3, metadata={"position_unit": "nm"})
+    plain = bt.Recording(y, frame_interval=1e-3, exposure=1e-3)
+    rows = recordings_table([nm, plain])
+    assert rows[0].endswith("| positions |")
+    assert rows[2].endswith("| m (read from nm) |") and rows[3].endswith("| m |")
