@@ -151,6 +151,7 @@ def calibrate(
         raise FitError(str(err) + band_sentence(recs, f_range, excluded_ranges)) from err
     res = finish_instrument(res, plan).with_inputs(plan.recordings, plan.model,
                                                    plan.f_range, plan.excluded)
+    res = dataclasses.replace(res, extras={**res.extras, "held": sorted(plan.fixed)})
     data_notes += tuple(physics_notes(recs, radii, res, plan)) + tuple(detector_mismatch_note(res, plan))
     notes = tuple(plan.notes) + data_notes
     notes += tuple(misfit_note(res, tuple(res.notes) + notes))

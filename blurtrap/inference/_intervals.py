@@ -28,6 +28,9 @@ def wald_intervals(names, values, errors, at_bounds, extras):
             kinds[n] = "log-wald"
         elif n == "tracking_var" and v - h < 0 <= v:  # a variance: not below its bound
             ivs[n], kinds[n] = (0.0, float(v + h)), "wald (cut at 0)"
+    for n in (extras or {}).get("held", ()):  # held without an input error: no interval to speak of
+        if n in ivs and float(errors[list(names).index(n)]) == 0.0:
+            kinds[n] = "held"
     bound_se = (extras or {}).get("bound_se") or {}
     for n in at_bounds:
         if n in ivs:

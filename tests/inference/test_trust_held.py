@@ -375,3 +375,21 @@ def test_the_same_frames_twice_are_refused(x):
         bt.calibrate([a, b])
     res = bt.calibrate([a, b], strict=False)
     assert any("identical positions" in n for n in res.notes)
+
+
+def test_a_held_parameter_without_an_input_error_has_the_interval_kind_held():
+    """friction='stokes' without a radius error: gamma's interval is its value twice; it said
+    "wald" (a reviewer read it as a fitted interval)."""
+    import math
+
+    import numpy as np
+    from scipy.signal import lfilter
+
+    kt, k, g, dt = 1.380649e-23 * 295, 5e-5, 6 * math.pi * 9.3e-4 * 1.5e-6, 1 / 1500
+    rng = np.random.default_rng(0)
+    rho, sig = math.exp(-dt * k / g), math.sqrt(kt / k)
+    x = lfilter([1.0], [1.0, -rho], rng.standard_normal(16384) * sig * math.sqrt(1 - rho**2))
+    r = bt.Recording(x + 2e-9 * rng.standard_normal(16384), frame_interval=dt, exposure=1e-5, temperature=295.0,
+                     metadata={"bead_radius_m": 1.5e-6})
+    kinds = bt.calibrate(r, friction="stokes").to_dict()["interval_kinds"]
+    assert kinds["gamma"] == "held" and kinds["k"] != "held"
