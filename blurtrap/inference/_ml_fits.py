@@ -123,7 +123,7 @@ def _pooling_notes(recs, layout, model, args, psd, whittle_nll, gof_p, fixed, f_
         power_law_note(recs, layout, model, args, whittle_nll, gof_p, fixed)
     # beside Cochran's note on eps^2 too: it has no refitted k and gamma (a reviewer: c 17 SE,
     # gamma 29 SE low with only that note)
-    noise = None if fit is None else _noise_pooling.noise_note(layout, args, *fit, fixed)
+    noise = None if fit is None else _noise_pooling.noise_note(layout, args, fit[0], fit[1], fixed)
     return [n for n in ("; ".join(n for n in (k_note, other) if n), power, noise) if n]
 
 

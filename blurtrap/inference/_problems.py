@@ -41,18 +41,20 @@ class Labels(tuple):
     laser powers or recording names reuses the compiled fits of the same structure instead
     of compiling them again (2-7 s each). Never use one as a dict key across layouts."""
 
-    def _key(self):
-        return tuple(n.split("[", 1)[0] + "[]" if "[" in n else n for n in self)
-
     def __eq__(self, other):
         return isinstance(other, tuple) and len(self) == len(other) and \
-            self._key() == Labels._key(other)
+            _structure(self) == _structure(other)
 
     def __ne__(self, other):
         return not self == other
 
     def __hash__(self):
-        return hash(self._key())
+        return hash(_structure(self))
+
+
+def _structure(names: tuple) -> tuple:
+    """``names`` with every bracket emptied (``k[P=12 mW]`` -> ``k[]``)."""
+    return tuple(n.split("[", 1)[0] + "[]" if "[" in n else n for n in names)
 
 
 class Layout(eqx.Module):
