@@ -5,7 +5,7 @@ from the truth.
 Generator independent of blurtrap: exact Ornstein-Uhlenbeck substeps in numpy (16 substeps
 per exposure W = dt/2, the frame the mean of the positions at the substep midpoints), plus
 Gaussian tracking noise. Four laser powers 0.25, 0.5, 1, 2 W, k = c P (c = 0.05 pN/nm/W),
-gamma = 9.4 pN ms/um... (9.4e-9 N s/m), 2000 fps, 16 384 frames each, fitted with
+gamma = 9.4e-9 N s/m (0.0094 pN s/um), 2000 fps, 16 384 frames each, fitted with
 k='linear_power' (Whittle). Cases: ``photon`` (eps = 2 nm / sqrt(P/W): 4, 2.8, 2, 1.4 nm, an
 independent pass's case), ``strong`` (3 nm / sqrt(P/W)) and ``equal`` (2.8 nm on every
 recording: the false-alarm control).

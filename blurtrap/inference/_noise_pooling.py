@@ -7,14 +7,15 @@ laser powers or exposures often differ in it. An independent pass: four powers w
 of fit p = 0.63, no note (the Cochran test of :mod:`._pooling` runs only when the goodness of
 fit fails, and one recording alone often cannot identify its own eps^2).
 
-The test here needs no fit per recording: at the joint estimate, the score of one eps^2 per
-recording (``eps^2_i = eps^2 + delta_i``, ``delta_0 = 0``) is tested with the nuisance
-parameters projected out (Rao's efficient score test on the same Whittle/Gamma objective,
-chi^2 with R - 1 dof). Its one-step Newton estimate in the enlarged model gives each
-recording's eps^2 and how far k and gamma would move; the note appears when the test rejects
-at :data:`NOISE_ALPHA` and k, c or gamma would move by more than :data:`NOISE_SHIFT_SE` of
-its standard error. The spectrum's derivatives are central differences of the compiled model
-spectrum (linear in eps^2: exact there), so nothing is compiled for it.
+The check needs no fit per recording: the spectrum is linear in eps^2, so the joint
+objective with ``eps^2_i = eps^2 + delta_i`` (``delta_0 = 0``) is evaluated from the compiled
+model spectrum and its finite-difference derivatives (nothing is compiled for it). Where Rao's
+efficient score test of the offsets at the joint estimate has p < :data:`_SCORE_GATE`, Fisher
+scoring refits the enlarged model (stopping after one step when it is far from the note). The
+note appears when the likelihood ratio against one shared eps^2 has p < :data:`NOISE_ALPHA`
+or a Hausman |z| exceeds :data:`NOISE_HAUSMAN_Z`, and k, c or gamma moves by more than
+:data:`NOISE_SHIFT_SE` of its joint standard error; not beside a note that finds a recording
+not stationary (:func:`without_drift_confusion`).
 """
 
 from __future__ import annotations
@@ -26,10 +27,10 @@ import numpy as np
 from ._chi2 import chi2_sf
 from ._spectral import _psd_jit
 
-#: the efficient score test of one eps^2 per recording rejects below this p
+#: the likelihood ratio of one eps^2 per recording against the shared one rejects below this p
 NOISE_ALPHA = 0.01
-#: ... and the one-step fit with one eps^2 per recording moves k, c or gamma by more than
-#: this many of its standard errors
+#: ... and the refit with one eps^2 per recording moves k, c or gamma by more than this many
+#: of its joint standard errors
 NOISE_SHIFT_SE = 0.5
 _H = 1e-5  # relative step of the forward differences (log parameters)
 
@@ -42,6 +43,7 @@ def _derivatives(p, args, free):
     base = np.asarray(_psd_jit(p, args), dtype=float)
     for j, name in free:
         if name == "tracking_var":
+            # S is linear in eps^2: any step is exact; eps^2 itself, or (at 0) a small one
             step = max(abs(float(p[j])), float(np.max(base)) * 1e-6)
             q = np.array(p, dtype=float)
             q[j] += step
@@ -127,7 +129,7 @@ def _score_p(score, info, nf: int) -> float:
 
 
 #: after the first Fisher-scoring step, the refit stops when the likelihood ratio's p is above
-#: this and no Hausman |z| reaches 2 (the note is far from firing; saves ~2/3 of its time)
+#: this and no Hausman |z| reaches 2 (the note is far from firing)
 _EARLY_P = 0.1
 
 
