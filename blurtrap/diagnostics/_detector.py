@@ -11,11 +11,7 @@ otherwise (or say nothing) the note says which key to set.
 from __future__ import annotations
 
 from ..inference import FitError, TrapModel, calibrate
-
-#: log-likelihood difference that names one detector model over the other
-DETECTOR_DLOGL = 10.0
-#: below this sampling rate the aliased and anti-aliased models are not compared (cameras)
-MIN_RATE_HZ = 2000.0
+from ..inference.internal import DETECTOR_DLOGL, MIN_RATE_HZ  # calibrate's own check uses them too
 
 _FOLDED = TrapModel(blur=True, alias=True, noise=True, name="standard")
 _UNFOLDED = TrapModel(blur=False, alias=False, noise=True, name="photodiode_aa")

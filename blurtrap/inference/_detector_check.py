@@ -14,10 +14,11 @@ import math
 from ._ml_fits import screen_model
 from ._models import TrapModel
 
-#: the log-likelihood difference that names the folded model over the anti-aliased one (as
-#: diagnose's detector note: far beyond chance for non-nested models of equal size)
+#: the log-likelihood difference that names the folded model over the anti-aliased one (far
+#: beyond chance for non-nested models of equal size; diagnose's detector note reads it too)
 DETECTOR_DLOGL = 10.0
-#: below this sampling rate no comparison (cameras, whose settings are not anti-aliased)
+#: below this sampling rate no comparison (cameras, whose settings are not anti-aliased; also
+#: diagnose's)
 MIN_RATE_HZ = 2000.0
 
 

@@ -6,6 +6,7 @@ imports a private module of ``blurtrap.inference`` (issue 16, clean boundaries).
 is the estimators' own object, re-exported unchanged.
 """
 
+from ._detector_check import DETECTOR_DLOGL, MIN_RATE_HZ
 from ._fit import chi2_sf
 from ._fit_inputs import html_table
 from ._frames import _inspect_frames as inspect_frames
@@ -18,6 +19,8 @@ from ._spectral import _np_periodogram as np_periodogram
 from ._volts import _power_of as volts_power
 
 __all__ = [
+    "DETECTOR_DLOGL",
+    "MIN_RATE_HZ",
     "as_recordings",
     "chi2_sf",
     "default_model",
